@@ -1,0 +1,5 @@
+"""Allow ``python -m femstudy``."""
+
+from femstudy.cli import main
+
+raise SystemExit(main())
