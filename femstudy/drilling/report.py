@@ -1,0 +1,98 @@
+"""Summaries, CSV files and figures of load histories (used by ``femstudy loads``)."""
+
+from __future__ import annotations
+
+import csv
+import io
+
+import numpy as np
+
+from femstudy import atomic
+from femstudy.drilling.history import MODEL_TITLES, DrillingConditions, LoadHistory, evaluate
+
+CSV_COLUMNS = ["model", "time_s", "depth_mm", "thrust_N", "torque_Nmm"]
+MODEL_COLOURS = {"allotta": "tab:blue", "clogging": "tab:orange", "chi": "tab:green", "peng": "tab:red"}
+
+
+def key_points(cond: DrillingConditions, models) -> list[dict]:
+    """Thrust and torque of each model at contact, full engagement and breakthrough.
+
+    "contact" is evaluated just after touching (1e-9 s), so step models show their level.
+    """
+    times = cond.phase_times()
+    rows = []
+    for model in models:
+        for phase in ("contact", "full engagement", "breakthrough"):
+            t = max(times[phase], 1e-9)
+            h = evaluate(model, cond, [t])
+            rows.append({"model": model, "phase": phase, "time_s": t, "depth_mm": h.depth_mm[0],
+                         "thrust_N": h.thrust_N[0], "torque_Nmm": h.torque_Nmm[0]})
+    return rows
+
+
+def summary_text(cond: DrillingConditions, models) -> str:
+    """A short plain-text summary of the operating point and each model's key loads."""
+    mu_f, mu_w = cond.friction
+    F0, T0 = cond.static_allotta()
+    bone = cond.bone
+    inside = "inside" if bone.in_calibrated_range(cond.feed_mm_s, cond.spindle_rpm) else "OUTSIDE"
+    lines = [
+        f"drilling: f = {cond.feed_mm_s:g} mm/s, N = {cond.spindle_rpm:g} rpm, cortex {cond.cortex_mm:g} mm, "
+        f"drill D = {cond.drill.diameter_mm:g} mm, point angle {cond.drill.point_angle_deg:g} deg",
+        f"  feed per revolution  a    = {cond.feed_per_rev_mm:.4f} mm/rev",
+        f"  bone set '{bone.name}' ({bone.source}); power law {inside} its calibrated range",
+        f"  friction             mu_f = {mu_f:.4f}   mu_w = {mu_w:.4f}",
+        f"  chip-evacuation growth p  = {cond.growth_exponent:.4f} per drill diameter of depth",
+        f"  specific energies    u1   = {bone.u1_MPa:g} MPa (cortical), u2 = {bone.u2_MPa:g} MPa (cancellous)",
+        f"  static Allotta load  F    = {F0:.2f} N, T = {T0:.2f} N.mm",
+        "",
+        f"  {'model':<9} {'phase':<16} {'time_s':>7} {'depth_mm':>9} {'thrust_N':>9} {'torque_Nmm':>11}",
+    ]
+    for r in key_points(cond, models):
+        torque = "-" if np.isnan(r["torque_Nmm"]) else f"{r['torque_Nmm']:.2f}"
+        lines.append(f"  {r['model']:<9} {r['phase']:<16} {r['time_s']:7.3f} {r['depth_mm']:9.3f} "
+                     f"{r['thrust_N']:9.2f} {torque:>11}")
+    return "\n".join(lines)
+
+
+def write_csv(path, histories: list[LoadHistory]) -> None:
+    """Write histories in long form (one row per model and time); missing torque is empty."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(CSV_COLUMNS)
+    for h in histories:
+        for row in zip(h.time_s, h.depth_mm, h.thrust_N, h.torque_Nmm):
+            writer.writerow([h.model] + ["" if np.isnan(v) else f"{v:.6g}" for v in row])
+    atomic.write_text(path, buf.getvalue())
+
+
+def plot(path, cond: DrillingConditions, histories: list[LoadHistory]) -> None:
+    """Thrust and torque against time, all models overlaid, phases marked; saved atomically."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax_f, ax_t) = plt.subplots(2, 1, figsize=(8, 7.5), sharex=True, constrained_layout=True)
+    for h in histories:
+        style = {"label": MODEL_TITLES[h.model], "color": MODEL_COLOURS[h.model]}
+        ax_f.plot(h.time_s, h.thrust_N, **style)
+        if not np.all(np.isnan(h.torque_Nmm)):
+            ax_t.plot(h.time_s, h.torque_Nmm, **style)
+    for phase, t in cond.phase_times().items():
+        for ax in (ax_f, ax_t):
+            ax.axvline(t, color="0.6", lw=0.8, ls="--")
+        ax_f.annotate(phase, (t, 1.01), xycoords=("data", "axes fraction"), rotation=30,
+                      va="bottom", ha="left", fontsize=8, color="0.3")
+    ax_f.set_ylabel("thrust force [N]")
+    ax_t.set_ylabel("torque [N·mm]")
+    ax_t.set_xlabel("time after contact [s]")
+    fig.suptitle(f"Drilling loads: f = {cond.feed_mm_s:g} mm/s, N = {cond.spindle_rpm:g} rpm, "
+                 f"{cond.cortex_mm:g} mm cortex, bone set '{cond.bone.name}'")
+    for ax in (ax_f, ax_t):
+        ax.grid(True, alpha=0.3)
+        ax.set_ylim(bottom=0)
+        ax.legend(fontsize=8, loc="best", framealpha=0.9)
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format=str(path).rsplit(".", 1)[-1].lower())
+    plt.close(fig)

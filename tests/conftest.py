@@ -1,0 +1,38 @@
+"""Shared test helpers."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+TLEM2_FEMUR = SHARED / "data" / "femur-tlem2" / "femur_r.stl"
+
+
+def run_cli(*args: str, cwd: Path | None = None, env: dict | None = None,
+            timeout: float = 600) -> subprocess.CompletedProcess:
+    """Run ``python -m femstudy ARGS`` and capture its output."""
+    full_env = {**os.environ, "MPLBACKEND": "Agg", **(env or {})}
+    return subprocess.run([sys.executable, "-m", "femstudy", *args], cwd=cwd, env=full_env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def assert_clean_failure(proc: subprocess.CompletedProcess, expected: str) -> None:
+    """A user error: non-zero exit, the expected message on stderr, no traceback."""
+    assert proc.returncode != 0, proc.stdout
+    assert "Traceback" not in proc.stderr, proc.stderr
+    assert expected in proc.stderr, proc.stderr
+
+
+@pytest.fixture
+def bone_library(tmp_path, monkeypatch):
+    """An empty, private folder for calibrated bone sets."""
+    folder = tmp_path / "bones"
+    folder.mkdir()
+    monkeypatch.setenv("FEMSTUDY_BONES", str(folder))
+    return folder

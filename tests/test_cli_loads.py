@@ -1,0 +1,43 @@
+"""``femstudy loads`` end to end."""
+
+import csv
+
+import pytest
+
+from conftest import assert_clean_failure, run_cli
+
+
+def test_loads_prints_summary_and_writes_csv_and_plot(tmp_path):
+    out_csv, out_png = tmp_path / "h.csv", tmp_path / "h.png"
+    proc = run_cli("loads", "--feed", "2.0", "--rpm", "1500", "--csv", str(out_csv), "--plot", str(out_png))
+    assert proc.returncode == 0, proc.stderr
+    assert "mu_f = 0.2131" in proc.stdout and "a    = 0.0800 mm/rev" in proc.stdout
+    for model in ("allotta", "clogging", "chi", "peng"):
+        assert model in proc.stdout
+    rows = list(csv.DictReader(out_csv.open()))
+    assert set(rows[0]) == {"model", "time_s", "depth_mm", "thrust_N", "torque_Nmm"}
+    assert {r["model"] for r in rows} == {"allotta", "clogging", "chi", "peng"}
+    assert out_png.stat().st_size > 20_000
+
+
+def test_extrapolation_is_warned():
+    proc = run_cli("loads", "--feed", "4.0", "--rpm", "3000", "--bone", "human")
+    assert proc.returncode == 0
+    assert "outside the conditions" in proc.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--feed", "0", "--rpm", "1500"], "feed must be a positive"),
+    (["--feed", "-2", "--rpm", "1500"], "feed must be a positive"),
+    (["--feed", "2", "--rpm", "0"], "spindle speed must be positive"),
+    (["--feed", "2", "--rpm", "1500", "--point-angle", "180"], "point angle"),
+    (["--feed", "2", "--rpm", "1500", "--point-angle", "0"], "point angle"),
+    (["--feed", "2", "--rpm", "1500", "--cortex-mm", "0"], "cortical thickness"),
+    (["--feed", "2", "--rpm", "1500", "--bone", "goat"], "unknown bone coefficient set 'goat'"),
+    (["--feed", "fast", "--rpm", "1500"], "invalid float value"),
+])
+def test_bad_input_exits_2_with_one_clear_line(args, message):
+    proc = run_cli("loads", *args)
+    assert proc.returncode == 2
+    assert_clean_failure(proc, message)
+    assert len(proc.stderr.strip().splitlines()) == 1
