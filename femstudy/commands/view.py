@@ -1,0 +1,33 @@
+"""``femstudy view``: look at a results folder in PyVista."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+FIELDS = {"von_mises": "von_mises_MPa", "displacement": "displacement_magnitude_mm", "region": "region"}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("view", help="view a results folder (interactive, or an off-screen screenshot)",
+                       description="Show the deformed femur of a 'femstudy run' results folder. With a "
+                                   "display: an interactive window with a time slider. Without one, or "
+                                   "with --screenshot: an off-screen PNG.")
+    p.add_argument("results", type=Path, help="results folder written by 'femstudy run'")
+    p.add_argument("--loading", choices=("dynamic", "static"), default="dynamic")
+    p.add_argument("--time", type=float, default=None, metavar="T",
+                   help="time [s] to show (default: the time of peak deflection)")
+    p.add_argument("--field", choices=tuple(FIELDS), default="von_mises")
+    p.add_argument("--warp", type=float, default=None, metavar="F",
+                   help="deformation scale factor (default: the one in summary.json)")
+    p.add_argument("--screenshot", type=Path, default=None, metavar="PNG",
+                   help="write a PNG instead of opening a window")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from femstudy.study.viewer import view
+
+    view(args.results, loading=args.loading, time_s=args.time, field=FIELDS[args.field],
+         warp=args.warp, screenshot=args.screenshot)
+    return 0

@@ -1,0 +1,1 @@
+"""The drilling study: case file → mesh → load histories → FE solutions → results folder."""

@@ -1,0 +1,75 @@
+"""Figures of a study run: loads, deflection and von Mises against time, dynamic vs static."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from femstudy import atomic
+from femstudy.study.results import LoadingResult
+
+STYLE = {"dynamic": {"color": "tab:orange", "label": "dynamic (cutting + chip evacuation)"},
+         "static": {"color": "tab:blue", "label": "static Allotta"}}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> None:
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    fig.clf()
+
+
+def _panel(ax, results, quantity, ylabel, linestyle="-", suffix=""):
+    for r in results:
+        style = STYLE[r.name]
+        ax.plot(r.time_s, getattr(r, quantity), ls=linestyle, marker=".", ms=3, color=style["color"],
+                label=style["label"] + suffix)
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(bottom=0)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+
+
+def write_figures(folder: Path, title: str, results: list[LoadingResult]) -> list[str]:
+    """Write loads.png, deflection.png and von_mises.png into ``folder``; return their names."""
+    plt = _pyplot()
+    written = []
+
+    fig, (ax_f, ax_t) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True, constrained_layout=True)
+    _panel(ax_f, results, "thrust_N", "thrust force [N]")
+    _panel(ax_t, results, "torque_Nmm", "torque [N·mm]")
+    ax_t.set_xlabel("time after contact [s]")
+    fig.suptitle(f"{title}: drilling loads")
+    _save(fig, folder / "loads.png")
+    written.append("loads.png")
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), constrained_layout=True)
+    _panel(ax, results, "max_deflection_mm", "deflection [mm]", suffix=", maximum")
+    for r in results:
+        ax.plot(r.time_s, r.drill_point_deflection_mm, ls="--", color=STYLE[r.name]["color"],
+                label=STYLE[r.name]["label"] + ", at drill point")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_xlabel("time after contact [s]")
+    ax.set_title(f"{title}: deflection (displacement magnitude)")
+    _save(fig, folder / "deflection.png")
+    written.append("deflection.png")
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.5), constrained_layout=True)
+    _panel(ax, results, "max_von_mises_MPa", "von Mises stress [MPa]", suffix=", maximum")
+    for r in results:
+        ax.plot(r.time_s, r.max_von_mises_excl_MPa, ls="--", color=STYLE[r.name]["color"],
+                label=STYLE[r.name]["label"] + ", outside load-patch zone")
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_xlabel("time after contact [s]")
+    ax.set_title(f"{title}: maximum von Mises stress")
+    _save(fig, folder / "von_mises.png")
+    written.append("von_mises.png")
+    plt.close("all")
+    return written

@@ -1,0 +1,56 @@
+"""Load histories of a study case: the dynamic (cutting + chip evacuation) and the static
+Allotta loading, sampled on the case's time grid (thesis §5.9).
+
+Dynamic: model "clogging" of :mod:`femstudy.drilling.history` at the case's feed, speed,
+drill and bone set, with the hole's cortex equal to the drilled depth. Static: Allotta's
+full-engagement thrust and torque, constant in time (the thesis's comparison load).
+Units: s, N, N·mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from femstudy.casefile import Case
+from femstudy.drilling import Drill, DrillingConditions, LoadHistory, evaluate, load_bone_set, time_grid
+
+
+@dataclass(frozen=True)
+class CaseLoading:
+    """Both loadings on one time grid, and what they were computed from."""
+
+    conditions: DrillingConditions
+    depth_mm: float
+    dynamic: LoadHistory
+    static_thrust_N: float
+    static_torque_Nmm: float
+
+    @property
+    def times_s(self) -> np.ndarray:
+        return self.dynamic.time_s
+
+    def static(self) -> LoadHistory:
+        """The static Allotta load as a (constant) history on the same grid."""
+        t = self.times_s
+        return LoadHistory("static allotta", t, self.dynamic.depth_mm,
+                           np.full_like(t, self.static_thrust_N), np.full_like(t, self.static_torque_Nmm))
+
+
+def drilled_depth_mm(case: Case, cortical_thickness_mm: float) -> float:
+    """The unicortical depth: the case's fixed depth, or the local cortex along the drill axis."""
+    return cortical_thickness_mm if case.drilling.depth_mm == "cortex" else float(case.drilling.depth_mm)
+
+
+def case_loading(case: Case, cortical_thickness_mm: float) -> CaseLoading:
+    """Evaluate both loadings of ``case`` on its time grid (0 … end_s in step_s)."""
+    drill = Drill(diameter_mm=case.drill.diameter_mm, point_angle_deg=case.drill.point_angle_deg)
+    if case.drill.wall_mm is not None:
+        drill = drill.with_(wall_mm=case.drill.wall_mm)
+    depth = drilled_depth_mm(case, cortical_thickness_mm)
+    cond = DrillingConditions(case.drilling.feed_mm_s, case.drilling.spindle_rpm, depth,
+                              load_bone_set(case.drilling.bone), drill)
+    times = time_grid(cond, case.time.step_s, end_s=case.time.end_s)
+    thrust, torque = cond.static_allotta()
+    return CaseLoading(cond, depth, evaluate("clogging", cond, times), thrust, torque)

@@ -1,0 +1,115 @@
+"""``report.md`` of one run and the combined table of several, both rendered from
+``summary.json`` so a table can be rebuilt from finished results folders."""
+
+from __future__ import annotations
+
+from femstudy.study.thesis import MAX_DEFLECTION_MM, MAX_VON_MISES_MPA
+
+THESIS_SITE = {"mid-diaphysis": "mid-diaphysis", "middiaphysis": "mid-diaphysis",
+               "proximal": "proximal", "distal": "distal"}
+
+
+def _fmt(value, digits: int = 4) -> str:
+    return "–" if value is None else f"{value:.{digits}g}"
+
+
+def thesis_values(site_name: str):
+    """Thesis Tables 5-14/5-15 (dynamic, static) for a site name, or None."""
+    key = THESIS_SITE.get(site_name.lower())
+    return (MAX_DEFLECTION_MM[key], MAX_VON_MISES_MPA[key]) if key else None
+
+
+def run_report(summary: dict) -> str:
+    """A short Markdown report a researcher can paste from."""
+    case, mesh, site, load = summary["case"], summary["mesh"], summary["site"], summary["loading"]
+    res, solver, modal = summary["results"], summary["solver"], summary.get("modal", {})
+    thesis = thesis_values(site["name"])
+    excl = case["analysis"]["exclusion_radius_mm"]
+    rows = [("maximum deflection [mm]", "max_deflection_mm", 0),
+            ("deflection at the drill point [mm]", "drill_point_deflection_mm", None),
+            ("maximum von Mises stress [MPa]", "max_von_mises_MPa", 1),
+            (f"max von Mises outside {excl:g} mm of the patch [MPa]", "max_von_mises_excl_MPa", None)]
+    lines = [f"# {case['name']}: drilling at the {site['name']} site", "",
+             case.get("description", ""), "",
+             f"Femur: {mesh['surface']} ({mesh['length_mm']:.0f} mm), {mesh['n_tets']:,} tetrahedra, "
+             f"P{case['mesh']['order']} elements, {solver['dofs']:,} DOFs; both ends clamped over "
+             f"{case['clamps']['length_mm']:g} mm. Drill Ø{case['drill']['diameter_mm']:g} mm at "
+             f"f = {load['feed_mm_s']:g} mm/s, N = {load['spindle_rpm']:g} rpm, {load['depth_mm']:.2f} mm "
+             f"unicortical ({load['bone_set']} friction: μ_f = {load['mu_f']:.4f}, μ_w = {load['mu_w']:.4f}).",
+             "", "| quantity | dynamic | static Allotta | ratio | thesis dynamic | thesis static | thesis ratio |",
+             "|---|---|---|---|---|---|---|"]
+    for label, key, thesis_index in rows:
+        r = res[key]
+        t = thesis[thesis_index] if thesis and thesis_index is not None else None
+        lines.append(f"| {label} | {_fmt(r['dynamic']['value'])} (t = {r['dynamic']['time_s']:.2f} s) | "
+                     f"{_fmt(r['static']['value'])} | {_fmt(r['ratio_dynamic_to_static'], 3)} | "
+                     f"{_fmt(t[0] if t else None)} | {_fmt(t[1] if t else None)} | "
+                     f"{_fmt(t[0] / t[1] if t else None, 3)} |")
+    lines += ["", f"Peak loads: dynamic {load['peak_thrust_N']:.1f} N / {load['peak_torque_Nmm']:.1f} N·mm, "
+                  f"static {load['static_thrust_N']:.1f} N / {load['static_torque_Nmm']:.1f} N·mm.", ""]
+    lines += ["**Margin to failure** (strength / peak von Mises, dynamic loading, whole region "
+              "including the patch):", "", "| region | peak von Mises [MPa] | strength [MPa] | safety factor |",
+              "|---|---|---|---|"]
+    for region, m in summary["margins"]["dynamic"].items():
+        kind = "yield" if "yield_MPa" in m else "ultimate"
+        lines.append(f"| {region} | {_fmt(m['peak_von_mises_MPa'])} | {m[kind + '_MPa']:g} ({kind}) | "
+                     f"{_fmt(m['safety_factor_' + kind], 3)} |")
+    if modal:
+        lines += ["", f"Lowest natural frequency {modal['frequencies_Hz'][0]:.1f} Hz (period "
+                      f"{1e3 / modal['frequencies_Hz'][0]:.2f} ms) against a time step of "
+                      f"{case['time']['step_s']:g} s: "
+                      + ("the step resolves the lowest mode." if modal["step_resolves_lowest_mode"] else
+                         "the step does not resolve it, so the loading is quasi-static and inertia is "
+                         "negligible.")
+                      + f" Dynamic amplification (transient / quasi-static peak deflection): "
+                        f"{modal['dynamic_amplification']:.4f}."]
+    lines += ["", f"Solved with {solver['linear_solver']} in {summary['timings']['total_s']:.1f} s "
+                  f"(mesh {summary['timings']['mesh_s']:.1f} s"
+                  f"{', cached' if mesh.get('cache_hit') else ''}). Figures: loads.png, deflection.png, "
+                  "von_mises.png, femur.png. Fields: fields/fields.pvd (ParaView).", ""]
+    return "\n".join(lines)
+
+
+def study_table(summaries: list[dict]) -> str:
+    """The three-site table beside the thesis's Tables 5-14 and 5-15, as Markdown."""
+    lines = ["| site | max deflection dynamic [mm] | static [mm] | ratio | thesis dyn. | thesis stat. | "
+             "max von Mises dynamic [MPa] | static [MPa] | ratio | thesis dyn. | thesis stat. | "
+             "von Mises outside exclusion, dynamic [MPa] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for s in summaries:
+        res = s["results"]
+        d, v, ve = res["max_deflection_mm"], res["max_von_mises_MPa"], res["max_von_mises_excl_MPa"]
+        thesis = thesis_values(s["site"]["name"])
+        td, tv = thesis if thesis else ((None, None), (None, None))
+        lines.append(f"| {s['site']['name']} | {_fmt(d['dynamic']['value'])} | {_fmt(d['static']['value'])} | "
+                     f"{_fmt(d['ratio_dynamic_to_static'], 3)} | {_fmt(td[0])} | {_fmt(td[1])} | "
+                     f"{_fmt(v['dynamic']['value'])} | {_fmt(v['static']['value'])} | "
+                     f"{_fmt(v['ratio_dynamic_to_static'], 3)} | {_fmt(tv[0])} | {_fmt(tv[1])} | "
+                     f"{_fmt(ve['dynamic']['value'])} |")
+    return "\n".join(lines)
+
+
+STUDY_DISCUSSION = """\
+Why the numbers differ from the thesis's Tables 5-14/5-15:
+
+- **Geometry.** The thesis used a commercial solid model (Pacific Research Labs, medium left femur)
+  meshed by ANSYS at 22 mm; femstudy uses its parametric femur (or your surface) with a smooth canal
+  carved from the outer surface and a cortex profile set in the case file. Local cortical thickness and
+  the section's second moment of area at the site control both deflection and stress.
+- **Load patch versus point load.** The thesis applied a force and a torque at a point (Fig 3-13). A
+  point load on a 3-D continuum has unbounded local displacement and stress, so its "maximum" values
+  depend on the mesh. femstudy spreads the thrust over the drill footprint (Ø 2.7 mm) and the torque as
+  a linearly varying shear. The maximum stress it reports next to the patch is finite but still
+  mesh-sensitive. The stress outside the exclusion radius is the converged measure; see
+  `femstudy sweep`.
+- **Element order and size.** ANSYS's default 10-node tetrahedra at 22 mm cannot resolve a drill-sized
+  load. femstudy uses P2 tetrahedra refined to about 1 mm at the site.
+- **Clamp extent.** Both ends are fixed over `clamps.length_mm` of surface. The thesis's Fig 3-12 fixes
+  end faces of unstated extent, so a longer clamp stiffens short end segments, which matters at the
+  proximal and distal sites.
+- **Loads.** The dynamic/static ratio here is the ratio of the chip-clogging load at breakthrough to the
+  Allotta full-engagement load, because the response is quasi-static (see each report's modal
+  paragraph). The thesis's ratio of about 4.8 implies a larger load growth than its own calibrated
+  model gives over a 6 mm cortex at 2 mm/s and 1500 rpm (exp(p·z) ≈ 2.4 here). Its static Allotta load
+  used literature specific cutting energies that it does not state.
+"""
