@@ -1,0 +1,1 @@
+"""Mesh-convergence and parameter sweeps."""
