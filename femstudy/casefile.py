@@ -145,11 +145,14 @@ class DrillSpec(_Section):
 
 
 class DrillingSpec(_Section):
-    """Operating point and load models. ``depth_mm = "cortex"`` drills the local cortex."""
+    """Operating point and load models. ``depth_mm = "cortex"`` drills the local cortex.
+    ``mu_f``/``mu_w`` replace the bone set's power law (e.g. to sweep friction)."""
 
     feed_mm_s: float = Field(2.0, gt=0, le=50)
     spindle_rpm: float = Field(1500.0, gt=0, le=100_000)
     bone: str = "bovine"
+    mu_f: float | None = Field(None, gt=0, le=5)
+    mu_w: float | None = Field(None, gt=0, le=10)
     depth_mm: Union[Literal["cortex"], Annotated[float, Field(gt=0, le=100)]] = 6.0
 
 
@@ -173,7 +176,10 @@ class AnalysisSpec(_Section):
 
 
 class OutputSpec(_Section):
+    """What a run writes besides summary.json, timeseries.csv and report.md."""
+
     fields: bool = True
+    fields_every: int = Field(5, ge=1, description="write fields every n-th time step (and the last)")
     figures: bool = True
     screenshot: bool = True
 
@@ -293,6 +299,29 @@ def parse_case(text: str, source: Path | None = None) -> Case:
         more = f" (and {len(others)} more problem{'s' if len(others) > 1 else ''})" if others else ""
         raise UserError(f"{where}{f':{line}' if line else ''}: {message}{more}") from None
     return case.model_copy(update={"source": source})
+
+
+def with_overrides(case: Case, overrides: dict) -> Case:
+    """A copy of ``case`` with dotted keys replaced (``{"drilling.feed_mm_s": 1.5}``), validated."""
+    data = case.model_dump(mode="json", exclude={"source"})
+    for dotted, value in overrides.items():
+        node = data
+        *parents, last = dotted.split(".")
+        for key in parents:
+            if not isinstance(node.get(key), dict):
+                raise UserError(f"sweep key '{dotted}': '{key}' is not a section of a case file")
+            node = node[key]
+        if last not in node:
+            near = difflib.get_close_matches(last, list(node), n=1)
+            hint = f"; did you mean '{'.'.join(parents + [near[0]])}'?" if near else ""
+            raise UserError(f"sweep key '{dotted}' is not a case-file key{hint}")
+        node[last] = value
+    try:
+        updated = Case.model_validate(data)
+    except ValidationError as exc:
+        keys, message = _describe(exc.errors())
+        raise UserError(f"sweep value out of range: {message}") from None
+    return updated.model_copy(update={"source": case.source})
 
 
 def load_case(path: str | Path) -> Case:

@@ -65,3 +65,15 @@ def test_errors_name_the_key_and_the_line(text, expected):
 def test_missing_case_file():
     with pytest.raises(UserError, match="does not exist"):
         load_case("no/such/case.toml")
+
+
+def test_overrides_are_validated_like_the_file():
+    from femstudy.casefile import with_overrides
+
+    case = parse_case("name = 'x'\n")
+    changed = with_overrides(case, {"drilling.feed_mm_s": 1.5, "site.direction": "lateral"})
+    assert changed.drilling.feed_mm_s == 1.5 and changed.site.direction == "lateral"
+    with pytest.raises(UserError, match="did you mean 'drilling.feed_mm_s'"):
+        with_overrides(case, {"drilling.feed": 1.5})
+    with pytest.raises(UserError, match="drilling.feed_mm_s: Input should be greater than 0"):
+        with_overrides(case, {"drilling.feed_mm_s": -1})

@@ -60,3 +60,11 @@ def test_time_grid_ends_exactly_at_the_span():
 def test_every_model_evaluates_finite_thrust():
     for model in MODELS:
         assert np.all(np.isfinite(evaluate(model, COND, time_grid(COND, 0.05)).thrust_N))
+
+
+def test_friction_override_replaces_the_power_law():
+    fixed = DrillingConditions(2.0, 1500, 6.0, friction_override=(0.3, 0.7))
+    assert fixed.friction == (0.3, 0.7)
+    assert fixed.growth_exponent == pytest.approx(clogging.growth_exponent(0.3, 0.7))
+    with pytest.raises(UserError):
+        DrillingConditions(2.0, 1500, 6.0, friction_override=(0.3, -1.0))

@@ -48,18 +48,25 @@ CANCELLOUS_STRENGTH_MPA = 7.56
 
 @dataclass(frozen=True)
 class DrillingConditions:
-    """Operating point of one hole: feed, speed, cortex thickness, drill and bone set."""
+    """Operating point of one hole: feed, speed, cortex thickness, drill and bone set.
+
+    ``friction`` (μ_f, μ_w), when given, replaces the bone set's power law.
+    """
 
     feed_mm_s: float
     spindle_rpm: float
     cortex_mm: float = 6.0
     bone: BoneSet = field(default_factory=lambda: builtin_bone_set("bovine"))
     drill: Drill = Drill()
+    friction_override: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         feed_per_revolution(self.feed_mm_s, self.spindle_rpm)  # validates f and N
         require(np.isfinite(self.cortex_mm) and self.cortex_mm > 0,
                 f"cortical thickness must be a positive length in mm, got {self.cortex_mm}")
+        if self.friction_override is not None:
+            require(all(np.isfinite(m) and m > 0 for m in self.friction_override),
+                    f"friction coefficients must be positive, got {self.friction_override}")
 
     @property
     def feed_per_rev_mm(self) -> float:
@@ -68,7 +75,9 @@ class DrillingConditions:
 
     @property
     def friction(self) -> tuple[float, float]:
-        """(μ_f, μ_w) from the bone set's power law at (f, N)."""
+        """(μ_f, μ_w): the override if given, else the bone set's power law at (f, N)."""
+        if self.friction_override is not None:
+            return self.friction_override
         return self.bone.friction(self.feed_mm_s, self.spindle_rpm)
 
     @property
