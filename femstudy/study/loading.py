@@ -49,8 +49,12 @@ def case_loading(case: Case, cortical_thickness_mm: float) -> CaseLoading:
     if case.drill.wall_mm is not None:
         drill = drill.with_(wall_mm=case.drill.wall_mm)
     depth = drilled_depth_mm(case, cortical_thickness_mm)
-    cond = DrillingConditions(case.drilling.feed_mm_s, case.drilling.spindle_rpm, depth,
-                              load_bone_set(case.drilling.bone), drill)
+    bone = load_bone_set(case.drilling.bone)
+    friction = None
+    if case.drilling.mu_f is not None or case.drilling.mu_w is not None:
+        from_law = bone.friction(case.drilling.feed_mm_s, case.drilling.spindle_rpm)
+        friction = (case.drilling.mu_f or from_law[0], case.drilling.mu_w or from_law[1])
+    cond = DrillingConditions(case.drilling.feed_mm_s, case.drilling.spindle_rpm, depth, bone, drill, friction)
     times = time_grid(cond, case.time.step_s, end_s=case.time.end_s)
     thrust, torque = cond.static_allotta()
     return CaseLoading(cond, depth, evaluate("clogging", cond, times), thrust, torque)
