@@ -143,7 +143,8 @@ def format_normality(result: NormalityResult, title: str | None = None) -> str:
     else:
         lines.append(f"{title or result.name}: n = {result.n} < 30, chi-square not applied")
     verdict = "consistent with normal" if result.shapiro_p > 1 - CONFIDENCE else "NOT normal"
-    lines.append(f"  {result.name}: mean {result.mean:.6g}, sd {result.sd:.4g}, n = {result.n}; "
+    mean = 0.0 if abs(result.mean) < 1e-9 * max(result.sd, 1e-300) else result.mean
+    lines.append(f"  {result.name}: mean {mean:.6g}, sd {result.sd:.4g}, n = {result.n}; "
                  f"Shapiro-Wilk W = {result.shapiro_w:.4f}, p = {result.shapiro_p:.3f} ({verdict} at 5 %); "
                  f"median-rank plot r = {result.plot.r:.4f}")
     return "\n".join(lines)

@@ -12,6 +12,9 @@ retraction) as a :class:`ProcessedRun`:
 - the zero-phase low-pass of :mod:`femstudy.recordings.filtering`, applied to the isolated
   cut as in the thesis (isolate, normalise, filter), cut-off from the feed unless given.
 
+The filtered signal is for reading the trend and for figures. The calibration fits the
+unfiltered, de-drifted cut (:meth:`ProcessedRun.for_fitting`): noise, ripple and pulsation
+have zero mean, while any filter must guess the signal beyond the ends of the cut.
 Normalising the thrust by the initial cutting force (§4.5.2) needs F_o, which the Eq 4.8 fit
 provides: :meth:`ProcessedRun.normalised_thrust`.
 """
