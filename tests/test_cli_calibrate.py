@@ -4,7 +4,6 @@ import csv
 import shutil
 from dataclasses import replace
 
-import numpy as np
 import pytest
 
 from conftest import assert_clean_failure, run_cli
