@@ -2,16 +2,17 @@
 
 import csv
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from conftest import assert_clean_failure, run_cli
+from femstudy.drilling.friction import load_bone_set
 from femstudy.drilling.history import DrillingConditions, evaluate
 from femstudy.recordings import (Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, ThermalSoftening,
                                  read_recording, synthesize)
 from femstudy.recordings.dataset import dataset_recordings
-from femstudy.recordings.synthetic import fixed_friction_bone
 
 CLEAN = Effects.none()
 
@@ -19,8 +20,8 @@ CLEAN = Effects.none()
 def test_clean_recording_is_the_load_model_shifted_to_contact():
     rec = synthesize(1.5, 1250, cortex_mm=7.0, effects=CLEAN, approach_s=1.0)
     m = rec.metadata
-    cond = DrillingConditions(1.5, 1250, 7.0, fixed_friction_bone(m["true_mu_f"], m["true_mu_w"],
-                                                                   m["u1_MPa"], m["u2_MPa"]))
+    bone = replace(load_bone_set("bovine"), u1_MPa=m["u1_MPa"], u2_MPa=m["u2_MPa"])
+    cond = DrillingConditions(1.5, 1250, 7.0, bone, friction_override=(m["true_mu_f"], m["true_mu_w"]))
     cutting = rec.time_s < m["true_retraction_s"]
     model = evaluate("clogging", cond, rec.time_s[cutting] - 1.0)
     np.testing.assert_allclose(rec.thrust_N[cutting], model.thrust_N, rtol=1e-9, atol=1e-9)

@@ -22,7 +22,7 @@ Deterministic for a given ``seed``; a 20 s recording at 1 kHz takes a few millis
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -99,16 +99,6 @@ class Effects:
                                         ("thermal_softening", self.softening)) if on is not None]
 
 
-def fixed_friction_bone(mu_f: float, mu_w: float, u1_MPa: float, u2_MPa: float,
-                        name: str = "synthetic") -> BoneSet:
-    """A bone set whose power law is the constant (μ_f, μ_w) at every feed and speed."""
-    require(mu_f > 0 and mu_w > 0, f"friction coefficients must be positive, got {mu_f}, {mu_w}")
-    grid = [(f, n) for f in (1.0, 2.0) for n in (1000.0, 2000.0)]
-    return BoneSet(name=name, feed_mm_s=tuple(g[0] for g in grid), spindle_rpm=tuple(g[1] for g in grid),
-                   mu_f=(mu_f,) * 4, mu_w=(mu_w,) * 4, u1_MPa=u1_MPa, u2_MPa=u2_MPa,
-                   source="constant friction")
-
-
 def _modulation(pulsation: FeedPulsation | None, t: np.ndarray) -> np.ndarray:
     """Zero-mean feed modulation m(t), f(t) = f (1 + m)."""
     if pulsation is None:
@@ -157,7 +147,8 @@ def synthesize(feed_mm_s: float = 1.5, spindle_rpm: float = 1500.0, *, cortex_mm
     mf, mw = (mu_f if mu_f is not None else mf), (mu_w if mu_w is not None else mw)
     u1 = bone_set.u1_MPa if u1_MPa is None else u1_MPa
     u2 = bone_set.u2_MPa if u2_MPa is None else u2_MPa
-    cond = DrillingConditions(feed_mm_s, spindle_rpm, cortex_mm, fixed_friction_bone(mf, mw, u1, u2), drill)
+    cond = DrillingConditions(feed_mm_s, spindle_rpm, cortex_mm, replace(bone_set, u1_MPa=u1, u2_MPa=u2), drill,
+                              friction_override=(mf, mw))
     stop_depth = cortex_mm + overtravel_mm if stop_depth_mm is None else stop_depth_mm
     require(stop_depth > 0, f"stop depth must be positive, got {stop_depth}")
     rng = np.random.default_rng(seed)
