@@ -41,3 +41,13 @@ def test_bad_input_exits_2_with_one_clear_line(args, message):
     assert proc.returncode == 2
     assert_clean_failure(proc, message)
     assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_output_piped_into_a_reader_that_stops_early_is_not_a_traceback():
+    import subprocess
+    import sys
+
+    proc = subprocess.run(f"'{sys.executable}' -m femstudy loads --feed 2 --rpm 1500 | head -n 1",
+                          shell=True, capture_output=True, text=True)
+    assert proc.stdout.startswith("drilling:")
+    assert "Traceback" not in proc.stderr and "BrokenPipe" not in proc.stderr
