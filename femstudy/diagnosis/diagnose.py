@@ -1,0 +1,192 @@
+"""Diagnose one recording against one simulation: locate, explain, model, show the improvement.
+
+Steps (each in its module): the analysis band and the noise level (:mod:`.band`); the
+alignment of the simulation (shift, tare, and the stop depth of a load model); the mismatch
+intervals of the aligned simulation (:mod:`.locate`); fits of every subset of the four
+mechanisms (:mod:`.fit`); selection (:mod:`.select`); the physical reading of the selected
+parameters (:mod:`.explain`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from femstudy.diagnosis import explain
+from femstudy.diagnosis.band import make_band, white_noise_sigma
+from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
+from femstudy.diagnosis.fit import Fit, fit_all, fit_subset, seeds
+from femstudy.diagnosis.locate import mismatch_intervals
+from femstudy.diagnosis.mechanisms import Geometry, Problem
+from femstudy.diagnosis.select import Selection, select
+from femstudy.errors import require
+from femstudy.recordings.reader import Recording
+
+#: Shifts tried before the alignment is refined [s].
+SHIFT_GRID_S = np.arange(-0.3, 0.3001, 0.01)
+
+
+@dataclass
+class Diagnosis:
+    """Everything the command reports."""
+
+    recording: Recording
+    problem: Problem
+    baseline: Fit
+    fits: dict
+    selection: Selection
+    mismatch: list
+    mechanisms: list             # dicts: mechanism, confidence, parameters, explanation
+    fit_summary: dict            # per channel: baseline/improved r2, rmse
+    seconds: float
+    notes: list = field(default_factory=list)
+
+    @property
+    def improved(self) -> Fit:
+        return self.fits[self.selection.subset]
+
+    def to_json(self) -> dict:
+        """The issue's JSON contract, with per-channel and selection detail added."""
+        thrust = self.fit_summary["thrust_N"]
+        return {
+            "mismatch": self.mismatch,
+            "missing_physics": self.mechanisms,
+            "fit": {"baseline": thrust["baseline"], "improved": thrust["improved"],
+                    "window_s": thrust["window_s"],
+                    "channels": {c: {k: v for k, v in s.items() if k != "window_s"}
+                                 for c, s in self.fit_summary.items()}},
+            "alignment": explain.alignment(self.problem, self.baseline),
+            "noise": {c: float(s) for c, s in zip(self.problem.channels, self.problem.sigma_raw)},
+            "residual_check": {"chi2_per_dof": round(self.selection.chi2_per_dof, 3),
+                               "p_value": self.selection.residual_p_value,
+                               "consistent_with_noise": bool(self.selection.residual_p_value > 1e-3)},
+            "selection": {"bic": {"+".join(sorted(s)) or "none": round(b, 2)
+                                  for s, b in sorted(self.selection.bic.items(), key=lambda kv: kv[1])},
+                          "not_selected": self.selection.dropped,
+                          "confidence": {m: round(c, 4) for m, c in self.selection.confidence.items()}},
+            "seconds": round(self.seconds, 3),
+            "notes": self.notes,
+        }
+
+
+def geometry_of(recording: Recording, cortex_mm: float) -> Geometry:
+    return Geometry(recording.feed_mm_s, recording.spindle_rpm, recording.drill, cortex_mm)
+
+
+def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[Problem, list]:
+    """Smooth the recording in the window the simulation covers; estimate its noise."""
+    notes = []
+    t = recording.time_s
+    lo, hi = simulation.span()
+    start, end = max(t[0], lo), min(t[-1], hi)
+    if start > t[0] or end < t[-1]:
+        notes.append(f"compared over {start:.3f}-{end:.3f} s, where the simulation has loads on both sides")
+    require(end - start > 1.0, f"the simulation covers only {max(end - start, 0):.2f} s of the recording; "
+                               f"it must overlap the cut (are both on the same clock?)")
+    band = make_band(t, recording.spindle_rpm, start, end)
+    require(band.t_dec.size >= 20, f"recording {recording.name} is too short to diagnose: "
+                                   f"{end - start:.2f} s gives {band.t_dec.size} smoothed samples, need 20")
+    channels = ["thrust_N"]
+    if recording.torque_Nmm is not None and simulation.has_torque:
+        channels.append("torque_Nmm")
+    elif recording.torque_Nmm is not None:
+        notes.append("the simulation has no torque: diagnosing on thrust alone")
+    inside = (t >= start) & (t <= end)
+    F_sim, T_sim = simulation.loads(t[inside])
+    raw = {"thrust_N": recording.thrust_N, "torque_Nmm": recording.torque_Nmm}
+    sims = {"thrust_N": F_sim, "torque_Nmm": T_sim}
+    sigma_raw = np.array([white_noise_sigma(t[inside], raw[c][inside] - sims[c]) for c in channels])
+    floor = 1e-6 * np.array([max(float(np.ptp(raw[c][inside])), 1e-9) for c in channels])
+    sigma_raw = np.maximum(sigma_raw, floor)
+    y = band.smooth(np.vstack([raw[c] for c in channels]))
+    sigma = sigma_raw[:, None] * band.noise_gain[None, :]
+    geometry = geometry_of(recording, cortex_mm)
+    F_o = float(simulation.loads(np.array([simulation.contact_s + geometry.cone_mm / geometry.feed_mm_s]))[0][0])
+    clogging_possible = cortex_mm > geometry.cone_mm + 0.05 * geometry.diameter_mm and F_o > 0
+    if not clogging_possible:
+        notes.append(f"the cortex ({cortex_mm:.2f} mm) is not thicker than the tip cone "
+                     f"({geometry.cone_mm:.2f} mm): chip clogging cannot be tested")
+    problem = Problem(band, tuple(channels), y, sigma, sigma_raw, simulation, geometry, F_o, clogging_possible)
+    return problem, notes
+
+
+def align(problem: Problem) -> Fit:
+    """The simulation aligned (shift, tare, stop depth): a grid, then least squares."""
+    empty = frozenset()
+    sim = problem.simulation
+
+    def cost(params):
+        return fit_subset_cost(problem, params)
+
+    start = {"shift_s": 0.0}
+    if sim.stop_is_parameter:
+        start["stop_depth_mm"] = sim.stop_depth_mm
+    start["shift_s"] = min(SHIFT_GRID_S, key=lambda s: cost({**start, "shift_s": s}))
+    if sim.stop_is_parameter:
+        f = problem.geometry.feed_mm_s
+        depths = start["stop_depth_mm"] + f * np.arange(-1.0, 1.0001, 0.02)
+        start["stop_depth_mm"] = min(depths[depths > 0], key=lambda d: cost({**start, "stop_depth_mm": d}))
+    return fit_subset(problem, empty, [start])
+
+
+def fit_subset_cost(problem: Problem, params: dict) -> float:
+    from femstudy.diagnosis.fit import _solve
+
+    res, _, _ = _solve(problem, frozenset(), params)
+    return float(sum(np.sum(r ** 2) for r in res))
+
+
+def _cut_window(problem: Problem, fit: Fit) -> np.ndarray:
+    """Instants from contact to one revolution after the stop (the cutting phase)."""
+    sim, t = problem.simulation, problem.band.t_dec
+    shift = fit.params["shift_s"]
+    stop = (sim.contact_s + fit.params["stop_depth_mm"] / problem.geometry.feed_mm_s
+            if sim.stop_is_parameter else sim.stop_s)
+    end = stop + shift + 60.0 / problem.geometry.spindle_rpm if math.isfinite(stop) else t[-1]
+    return (t >= sim.contact_s + shift) & (t <= end)
+
+
+def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> dict:
+    """R² and RMSE of the smoothed recording over the cutting phase, per channel."""
+    window = _cut_window(problem, baseline)
+    if np.count_nonzero(window) < 3:
+        window = np.ones_like(window)
+    out = {}
+    t = problem.band.t_dec[window]
+    for c, name in enumerate(problem.channels):
+        y = problem.y[c, window]
+        scores = {}
+        for label, fit in (("baseline", baseline), ("improved", improved)):
+            r = y - fit.model[c, window]
+            scores[label] = {"r2": round(float(1 - np.sum(r ** 2) / np.sum((y - y.mean()) ** 2)), 4),
+                             "rmse": round(float(np.sqrt(np.mean(r ** 2))), 4)}
+        out[name] = {**scores, "window_s": [round(float(t[0]), 3), round(float(t[-1]), 3)]}
+    return out
+
+
+def diagnose(recording: Recording, simulation: TraceSimulation | ModelSimulation, cortex_mm: float,
+             progress=None, bone_mu_w: float | None = None) -> Diagnosis:
+    """Diagnose ``recording`` against ``simulation`` (see the module docstring)."""
+    start = time.perf_counter()
+    say = progress or (lambda message: None)
+    problem, notes = build_problem(recording, simulation, cortex_mm)
+    say(f"{problem.band.t_dec.size} smoothed samples per channel ({', '.join(problem.channels)}), "
+        f"noise {', '.join(f'{s:.3g}' for s in problem.sigma_raw)}")
+    baseline = align(problem)
+    z = (problem.y - baseline.model) / problem.sigma
+    mismatch = sorted((interval for c, name in enumerate(problem.channels)
+                       for interval in mismatch_intervals(problem.band.t_dec, z[c], problem.band.n_eff_factor, name)),
+                      key=lambda i: (i["start_s"], i["channel"]))
+    say(f"aligned (shift {baseline.params['shift_s'] * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s)")
+    seed = seeds(problem, {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())})
+    fits = fit_all(problem, {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())}, seed)
+    say(f"fitted {len(fits)} mechanism subsets")
+    selection = select(problem, fits)
+    improved = fits[selection.subset]
+    mechanisms = explain.mechanisms(problem, improved, selection, bone_mu_w)
+    summary = summarise_fit(problem, baseline if baseline.subset == frozenset() else fits[frozenset()], improved)
+    return Diagnosis(recording, problem, fits[frozenset()], fits, selection, mismatch, mechanisms, summary,
+                     time.perf_counter() - start, notes)

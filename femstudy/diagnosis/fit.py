@@ -1,0 +1,224 @@
+"""Nonlinear least squares of mechanism subsets, with linear parameters projected out.
+
+For a subset of mechanisms the nonlinear parameters θ (alignment, growth exponent, pulsation,
+softening) are fitted with :func:`scipy.optimize.least_squares` (bounded, trust-region
+reflective); for each θ the linear ones (tare, drift rates, torque gain) are the weighted
+linear least-squares solution (variable projection). Residuals are weighted by the noise of
+each smoothed sample, so the cost is χ²/2.
+
+Starting points: the pulsation frequency is multimodal, so a scan over frequencies (0.15–3.5
+Hz) fits the exact linearisation of the pulsation term in (a, b) — load modulation plus depth
+lead — together with linear stand-ins for the other mechanisms, one small linear solve per
+frequency; its best local maxima start separate fits. Softening's time constant is seeded by a
+scan of the same kind. Each subset is also started from the fits of its subsets with one
+mechanism fewer; the best optimum is kept.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize, signal
+
+from femstudy.diagnosis.mechanisms import MECHANISMS, Problem
+
+FREQUENCY_GRID_HZ = np.geomspace(0.15, 3.5, 240)
+TAU_GRID_S = np.geomspace(0.2, 40.0, 16)
+NOMINAL_GROWTH = 0.5
+FREQUENCY_STARTS = 3
+
+
+@dataclass
+class Fit:
+    """One subset's optimum: parameters, χ² per channel, smoothed model and residual."""
+
+    subset: frozenset
+    params: dict                 # nonlinear and linear parameters by name
+    chi2: np.ndarray             # per channel (weighted by the noise of each sample)
+    model: np.ndarray            # smoothed model, channels × instants
+    n_params: int
+
+    @property
+    def chi2_total(self) -> float:
+        return float(self.chi2.sum())
+
+
+def _solve(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray | None = None):
+    """Weighted residual vector, linear parameters and smoothed model for nonlinear ``params``."""
+    parts = problem.design(subset, params)
+    names = problem.linear_names(subset)
+    residuals, linear, model = [], {}, []
+    for c, (base, A) in enumerate(parts):
+        w = 1.0 / problem.sigma[c]
+        use = slice(None) if rows is None else rows
+        target = (problem.y[c] - base) * w
+        Aw = A * w[:, None]
+        beta = np.linalg.lstsq(Aw[use], target[use], rcond=None)[0]
+        if names[c][-1] == "torque_gain_Nmm_per_N" and beta[-1] < 0:  # k_T = R μ_w l_w / M ≥ 0
+            beta = np.append(np.linalg.lstsq(Aw[use][:, :-1], target[use], rcond=None)[0], 0.0)
+        linear.update(zip(names[c], beta))
+        residuals.append(target - Aw @ beta)
+        model.append(base + A @ beta)
+    return residuals, linear, np.vstack(model)
+
+
+def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np.ndarray | None = None) -> Fit:
+    """The best of several bounded least-squares fits of one subset."""
+    names = problem.nonlinear_names(subset)
+    lo, hi = problem.bounds(names)
+    best = None
+    for start in starts:
+        x0 = np.clip([start[n] for n in names], lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        x0 = np.where(np.isfinite(x0), x0, lo)
+
+        def fun(x):
+            res, _, _ = _solve(problem, subset, dict(zip(names, x)), rows)
+            return np.concatenate([r if rows is None else r[rows] for r in res])
+
+        sol = optimize.least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac",
+                                     ftol=1e-6, xtol=1e-6, max_nfev=30 * (len(names) + 1))
+        if best is None or sol.cost < best.cost:
+            best = sol
+    params = dict(zip(names, best.x))
+    res, linear, model = _solve(problem, subset, params, rows)
+    chi2 = np.array([float(np.sum((r if rows is None else r[rows]) ** 2)) for r in res])
+    n_linear = sum(len(n) for n in problem.linear_names(subset))
+    return Fit(subset, {**params, **linear}, chi2, model, len(names) + n_linear)
+
+
+def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list[np.ndarray]:
+    """d(model)/da and d(model)/db at a = b = 0, per channel (smoothed): load scaling plus the
+    depth lead S'(τ)·δ."""
+    t = problem.band.t_model
+    sim = problem.simulation
+    shift = base_params["shift_s"]
+    t_contact = sim.contact_s + shift
+    tau = t - shift
+    w = 2 * math.pi * freq
+    sin, cos = np.sin(w * t), np.cos(w * t)
+    lead_a = (math.cos(w * t_contact) - cos) / w
+    lead_b = (sin - math.sin(w * t_contact)) / w
+    stop = (sim.contact_s + base_params["stop_depth_mm"] / problem.geometry.feed_mm_s
+            if sim.stop_is_parameter else sim.stop_s)
+    cutting = tau < stop
+    cols = []
+    F, T = sim.loads(tau, stop)
+    for load in ([F] + ([T] if problem.has_torque else [])):
+        slope = np.gradient(load, t)
+        col_a = np.where(cutting, load * sin + slope * lead_a, 0.0)
+        col_b = np.where(cutting, load * cos + slope * lead_b, 0.0)
+        cols.append(problem.band.smooth_model(np.vstack([col_a, col_b])))
+    return cols
+
+
+def _stand_in_columns(problem: Problem, base_params: dict, tau_s: float) -> list[np.ndarray]:
+    """Linear stand-ins per channel: tare, drift ramp, clogging at p = 0.5, softening at τ_s."""
+    terms = problem.terms({**base_params, "growth_exponent": NOMINAL_GROWTH})
+    plain = problem.terms(base_params)
+    t = problem.band.t_model
+    t_contact = problem.simulation.contact_s + base_params["shift_s"]
+    soft = -np.expm1(-np.maximum(t - t_contact, 0.0) / tau_s)
+    cols = []
+    for c in problem.channels:
+        clog = terms["thrust_N"] - plain["thrust_N"] if c == "thrust_N" else terms.get("clog", 0 * t)
+        smooth = problem.band.smooth_model(np.vstack([clog, plain[c] * soft]))
+        cols.append(np.column_stack([problem.ones, problem.ramp, smooth[0], smooth[1]]))
+    return cols
+
+
+def _scan(problem: Problem, base_params: dict, shared_of, tau_s: float):
+    """χ² of a joint linear fit (shared columns + per-channel stand-ins) for one candidate."""
+    stand_in = _stand_in_columns(problem, base_params, tau_s)
+    base = problem.design(frozenset(), base_params)
+    blocks, targets = [], []
+    n_channels = len(problem.channels)
+    for c in range(n_channels):
+        w = 1.0 / problem.sigma[c]
+        targets.append((problem.y[c] - base[c][0]) * w)
+    results = []
+    for key, shared in shared_of():
+        blocks = []
+        for c in range(n_channels):
+            w = 1.0 / problem.sigma[c]
+            own = [np.zeros_like(stand_in[k]) for k in range(n_channels)]
+            own[c] = stand_in[c]
+            blocks.append(np.column_stack([shared[c] * w[:, None]] + [o * w[:, None] for o in own]))
+        A, b = np.vstack(blocks), np.concatenate(targets)
+        coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+        results.append((key, float(np.sum((b - A @ coef) ** 2)), coef))
+    return results
+
+
+def seeds(problem: Problem, base_params: dict) -> dict:
+    """Starting values from linearised scans: pulsation frequencies (best few), a, b; softening
+    time constant and fraction; growth exponent."""
+    def frequencies():
+        for f in FREQUENCY_GRID_HZ:
+            cols = _pulsation_columns(problem, base_params, f)
+            yield f, [c.T for c in cols]
+
+    scan = _scan(problem, base_params, frequencies, tau_s=2.0)
+    chi2 = np.array([r[1] for r in scan])
+    peaks = signal.argrelmin(np.concatenate([[np.inf], chi2, [np.inf]]))[0] - 1
+    order = peaks[np.argsort(chi2[peaks])][:FREQUENCY_STARTS]
+    pulsations = []
+    for k in order:
+        f, _, coef = scan[k]
+        a, b = np.clip(coef[:2], -0.6, 0.6)
+        pulsations.append({"pulsation_frequency_hz": float(f), "pulsation_a": float(a), "pulsation_b": float(b)})
+
+    # softening time constant and growth exponent, with the best pulsation as a shared term
+    best_f = pulsations[0]["pulsation_frequency_hz"] if pulsations else 1.0
+    shared = [c.T for c in _pulsation_columns(problem, base_params, best_f)]
+    by_tau = []
+    for tau_s in TAU_GRID_S:
+        (_, value, coef), = _scan(problem, base_params, lambda: [(tau_s, shared)], tau_s=tau_s)
+        by_tau.append((value, tau_s, coef))
+    value, tau_s, coef = min(by_tau, key=lambda r: r[0])
+    n_shared = 2
+    thrust_coef = coef[n_shared:n_shared + 4]
+    softening = {"softening_fraction": float(np.clip(-thrust_coef[3], 0.02, 0.8)),
+                 "softening_log10_tau_s": float(math.log10(tau_s))}
+    g = problem.geometry
+    z_max = max(min(g.cortex_mm, 1e9) - g.cone_mm, 0.0) / g.diameter_mm
+    rise = max(thrust_coef[2], 0.02) * math.expm1(NOMINAL_GROWTH * z_max) if z_max > 0 else 0.0
+    growth = float(np.clip(math.log1p(rise) / z_max if z_max > 0 else NOMINAL_GROWTH, 0.02, 4.0))
+    return {"pulsations": pulsations, "softening": softening, "clogging": {"growth_exponent": growth}}
+
+
+def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: dict) -> list[dict]:
+    """Starts for one subset: the seeds (one per pulsation frequency candidate) and the fits of
+    each subset with one mechanism fewer, completed by the seeds."""
+    fixed = dict(base_params)
+    if "chip_clogging" in subset:
+        fixed.update(seed["clogging"])
+    if "thermal_softening" in subset:
+        fixed.update(seed["softening"])
+    starts = []
+    if "feed_pulsation" in subset:
+        starts += [{**fixed, **p} for p in seed["pulsations"]] or [{**fixed, "pulsation_a": 0.1,
+                                                                   "pulsation_b": 0.0,
+                                                                   "pulsation_frequency_hz": 1.0}]
+    else:
+        starts.append(fixed)
+    for m in subset:
+        previous = smaller.get(subset - {m})
+        if previous is not None:
+            start = {**fixed, **(seed["pulsations"][0] if seed["pulsations"] else {})}
+            start.update({k: v for k, v in previous.params.items()})
+            starts.append(start)
+    return starts
+
+
+def fit_all(problem: Problem, base_params: dict, seed: dict, subsets=None) -> dict:
+    """Fits of every subset of mechanisms (in order of size, each seeding the larger ones)."""
+    allowed = [m for m in MECHANISMS if m != "chip_clogging" or problem.clogging_possible]
+    if subsets is None:
+        subsets = [frozenset(m for k, m in enumerate(allowed) if mask >> k & 1)
+                   for mask in range(1 << len(allowed))]
+    fits: dict = {}
+    for subset in sorted(subsets, key=len):
+        fits[subset] = fit_subset(problem, subset, starting_points(subset, base_params, seed, fits))
+    return fits
