@@ -79,6 +79,12 @@ class TraceSimulation:
 
     stop_is_parameter = False
 
+    @classmethod
+    def from_recording(cls, rec, spindle_rpm: float) -> "TraceSimulation":
+        """A simulated trace read with :func:`femstudy.recordings.read_recording`."""
+        return cls(rec.time_s, rec.thrust_N, rec.torque_Nmm, spindle_rpm, rec.depth_mm,
+                   label=f"simulation {rec.name}")
+
     @property
     def has_torque(self) -> bool:
         return self.torque_Nmm is not None

@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import optimize
 
 from femstudy.diagnosis import explain
 from femstudy.diagnosis.band import make_band, white_noise_sigma
@@ -27,6 +28,10 @@ from femstudy.recordings.reader import Recording
 
 #: Shifts tried before the alignment is refined [s].
 SHIFT_GRID_S = np.arange(-0.3, 0.3001, 0.01)
+#: Huber threshold of the robust alignment, in noise units.
+HUBER_Z = 3.0
+#: Fewest unloaded instants from which a tare is taken.
+MIN_UNLOADED = 5
 
 
 @dataclass
@@ -114,29 +119,42 @@ def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[P
 
 
 def align(problem: Problem) -> Fit:
-    """The simulation aligned (shift, tare, stop depth): a grid, then least squares."""
-    empty = frozenset()
+    """The simulation as given, aligned robustly: each channel's tare is the median of
+    recording − simulation over the instants where the simulation is unloaded (all instants if
+    fewer than ``MIN_UNLOADED``); the shift (and a load model's stop depth) minimise the Huber
+    cost Σ ρ(z), ρ quadratic up to |z| = ``HUBER_Z`` and linear beyond, so stretches where
+    physics is missing do not drag the alignment."""
     sim = problem.simulation
 
+    def model(params):
+        parts = problem.design(frozenset(), params)
+        base = np.vstack([b for b, _ in parts])
+        unloaded = np.abs(base[0]) < 0.01 * max(float(np.max(np.abs(base[0]))), 1e-12)
+        use = unloaded if np.count_nonzero(unloaded) >= MIN_UNLOADED else np.ones_like(unloaded)
+        tare = np.median((problem.y - base)[:, use], axis=1)
+        return base + tare[:, None], tare
+
     def cost(params):
-        return fit_subset_cost(problem, params)
+        z = np.abs(problem.y - model(params)[0]) / problem.sigma
+        return float(np.sum(np.where(z <= HUBER_Z, 0.5 * z * z, HUBER_Z * z - 0.5 * HUBER_Z ** 2)))
 
-    start = {"shift_s": 0.0}
+    params = {"shift_s": 0.0}
     if sim.stop_is_parameter:
-        start["stop_depth_mm"] = sim.stop_depth_mm
-    start["shift_s"] = min(SHIFT_GRID_S, key=lambda s: cost({**start, "shift_s": s}))
-    if sim.stop_is_parameter:
-        f = problem.geometry.feed_mm_s
-        depths = start["stop_depth_mm"] + f * np.arange(-1.0, 1.0001, 0.02)
-        start["stop_depth_mm"] = min(depths[depths > 0], key=lambda d: cost({**start, "stop_depth_mm": d}))
-    return fit_subset(problem, empty, [start])
-
-
-def fit_subset_cost(problem: Problem, params: dict) -> float:
-    from femstudy.diagnosis.fit import _solve
-
-    res, _, _ = _solve(problem, frozenset(), params)
-    return float(sum(np.sum(r ** 2) for r in res))
+        params["stop_depth_mm"] = sim.stop_depth_mm
+        depths = np.arange(0.2, sim.max_depth_mm, problem.geometry.feed_mm_s * 0.02)
+    for _ in range(2 if sim.stop_is_parameter else 1):
+        params["shift_s"] = min(SHIFT_GRID_S, key=lambda s: cost({**params, "shift_s": s}))
+        if sim.stop_is_parameter:
+            params["stop_depth_mm"] = min(depths, key=lambda d: cost({**params, "stop_depth_mm": d}))
+    step = SHIFT_GRID_S[1] - SHIFT_GRID_S[0]
+    best = optimize.minimize_scalar(lambda s: cost({**params, "shift_s": s}), method="bounded",
+                                    bounds=(params["shift_s"] - step, params["shift_s"] + step),
+                                    options={"xatol": 1e-4})
+    params["shift_s"] = float(best.x)
+    fitted, tare = model(params)
+    params.update({f"{c}_tare": float(v) for c, v in zip(problem.channels, tare)})
+    chi2 = np.sum(((problem.y - fitted) / problem.sigma) ** 2, axis=1)
+    return Fit(frozenset(), params, chi2, fitted, len(problem.nonlinear_names(frozenset())) + len(problem.channels))
 
 
 def _cut_window(problem: Problem, fit: Fit) -> np.ndarray:
@@ -187,6 +205,6 @@ def diagnose(recording: Recording, simulation: TraceSimulation | ModelSimulation
     selection = select(problem, fits)
     improved = fits[selection.subset]
     mechanisms = explain.mechanisms(problem, improved, selection, bone_mu_w)
-    summary = summarise_fit(problem, baseline if baseline.subset == frozenset() else fits[frozenset()], improved)
-    return Diagnosis(recording, problem, fits[frozenset()], fits, selection, mismatch, mechanisms, summary,
+    summary = summarise_fit(problem, baseline, improved)
+    return Diagnosis(recording, problem, baseline, fits, selection, mismatch, mechanisms, summary,
                      time.perf_counter() - start, notes)

@@ -189,26 +189,24 @@ def seeds(problem: Problem, base_params: dict) -> dict:
 
 
 def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: dict) -> list[dict]:
-    """Starts for one subset: the seeds (one per pulsation frequency candidate) and the fits of
-    each subset with one mechanism fewer, completed by the seeds."""
+    """Starts for one subset: the seeds, and the best fit of a subset with one mechanism fewer
+    completed by the seeds. Pulsation alone is started at every candidate frequency; larger
+    subsets inherit the frequency through the smaller fits."""
     fixed = dict(base_params)
     if "chip_clogging" in subset:
         fixed.update(seed["clogging"])
     if "thermal_softening" in subset:
         fixed.update(seed["softening"])
-    starts = []
+    pulsations = seed["pulsations"] or [{"pulsation_a": 0.1, "pulsation_b": 0.0, "pulsation_frequency_hz": 1.0}]
     if "feed_pulsation" in subset:
-        starts += [{**fixed, **p} for p in seed["pulsations"]] or [{**fixed, "pulsation_a": 0.1,
-                                                                   "pulsation_b": 0.0,
-                                                                   "pulsation_frequency_hz": 1.0}]
-    else:
-        starts.append(fixed)
-    for m in subset:
-        previous = smaller.get(subset - {m})
-        if previous is not None:
-            start = {**fixed, **(seed["pulsations"][0] if seed["pulsations"] else {})}
-            start.update({k: v for k, v in previous.params.items()})
-            starts.append(start)
+        fixed.update(pulsations[0])
+    starts = [fixed]
+    if subset == {"feed_pulsation"}:
+        starts += [{**fixed, **p} for p in pulsations[1:]]
+    previous = [smaller[subset - {m}] for m in subset if subset - {m} in smaller]
+    if previous:
+        best = min(previous, key=lambda f: f.chi2_total)
+        starts.append({**fixed, **best.params})
     return starts
 
 

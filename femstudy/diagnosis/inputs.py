@@ -1,0 +1,68 @@
+"""The two inputs of a diagnosis: the recording's cut and the simulation to compare it with."""
+
+from __future__ import annotations
+
+from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
+from femstudy.drilling.history import DrillingConditions
+from femstudy.errors import UserError, require
+from femstudy.recordings.reader import Recording, read_recording
+
+DIAGNOSED_MODELS = ("allotta", "clogging")
+
+
+def cut_phase(rec: Recording):
+    """Contact and end of the cut, by :func:`femstudy.recordings.isolation.isolate`."""
+    from femstudy.recordings.isolation import isolate
+
+    m = rec.metadata
+    return isolate(rec.time_s, rec.thrust_N, rec.torque_Nmm, rec.feed_mm_s, rec.spindle_rpm,
+                   rec.drill.cone_length_mm, m.get("contact_s"), m.get("cut_end_s"), rec.name)
+
+
+def cortex_thickness(rec: Recording, given: float | None, phase=None) -> float:
+    """Cortex [mm]: ``given``, else the header's ``cortex_mm``, else feed × (breakthrough − contact)."""
+    if given is not None:
+        require(given > 0, f"--cortex-mm must be positive, got {given}")
+        return float(given)
+    if "cortex_mm" in rec.metadata:
+        value = rec.metadata["cortex_mm"]
+        require(isinstance(value, (int, float)) and value > 0,
+                f"recording {rec.name}: cortex_mm = {value!r} is not a positive length in mm")
+        return float(value)
+    phase = phase or cut_phase(rec)
+    require(phase.end_kind == "breakthrough",
+            f"recording {rec.name} ends by retraction, not breakthrough, so its cortex thickness is not "
+            f"measured: give --cortex-mm or '# cortex_mm = ...' in its header")
+    return rec.feed_mm_s * (phase.end_s - phase.contact_s)
+
+
+def read_simulation(path, rec: Recording) -> TraceSimulation:
+    """A simulated trace in the recording format; its feed and speed must match the recording's."""
+    keys = {"feed_mm_s": rec.feed_mm_s, "spindle_rpm": rec.spindle_rpm}
+    sim = read_recording(path, keys, override_header=True)
+    for key, value in keys.items():
+        for note in sim.notes:
+            if note.startswith(f"{key} = ") and "overrides" in note:
+                raise UserError(f"simulation {sim.name} was computed for {key} = {sim_header_value(note)} but the "
+                                f"recording {rec.name} has {key} = {value:g}")
+    return TraceSimulation.from_recording(sim, rec.spindle_rpm)
+
+
+def sim_header_value(note: str) -> str:
+    """The header's value in a reader note '<key> = <new> from the command line overrides <old> in the header'."""
+    return note.split(" overrides ", 1)[1].rsplit(" in the header", 1)[0]
+
+
+def model_simulation(rec: Recording, model: str, bone, cortex_mm: float | None) -> tuple[ModelSimulation, float]:
+    """Load model ``model`` for the recording's conditions, from its detected contact to its stop."""
+    require(model in DIAGNOSED_MODELS, f"--model must be one of {', '.join(DIAGNOSED_MODELS)}, got '{model}'")
+    phase = cut_phase(rec)
+    cortex = cortex_thickness(rec, cortex_mm, phase)
+    cond = DrillingConditions(rec.feed_mm_s, rec.spindle_rpm, cortex, bone, rec.drill)
+    stop_depth = rec.feed_mm_s * (phase.end_s - phase.contact_s)
+    if phase.end_kind == "breakthrough":  # the drill went on into cancellous bone: stop unknown
+        stop_depth = cortex + rec.drill.cone_length_mm
+    sim = ModelSimulation(model, cond, phase.contact_s, stop_depth,
+                          with_torque=rec.torque_Nmm is not None,
+                          max_depth_mm=rec.feed_mm_s * (rec.time_s[-1] - phase.contact_s))
+    return sim, cortex
