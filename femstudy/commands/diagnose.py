@@ -76,8 +76,7 @@ def run(args: argparse.Namespace) -> int:
         sim, cortex = inputs.model_simulation(rec, args.model, bone, args.cortex_mm)
         label = f"load model '{args.model}' (bone set '{bone.name}'), contact at {sim.contact_s:.3f} s"
     console.progress(f"read {rec.name} ({rec.time_s.size} samples) and the simulation ({label})")
-    d = diagnose(rec, sim, cortex, progress=console.progress,
-                 bone_mu_w=bone.friction(rec.feed_mm_s, rec.spindle_rpm)[1])
+    d = diagnose(rec, sim, cortex, bone, progress=console.progress)
     summary = report.summary_text(d, label)
     print(summary)
     if args.json:

@@ -23,6 +23,7 @@ from femstudy.diagnosis.fit import Fit, fit_all, fit_subset, seeds
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.mechanisms import Geometry, Problem
 from femstudy.diagnosis.select import Selection, select
+from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
 from femstudy.recordings.reader import Recording
 
@@ -89,8 +90,9 @@ def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[P
     start, end = max(t[0], lo), min(t[-1], hi)
     if start > t[0] or end < t[-1]:
         notes.append(f"compared over {start:.3f}-{end:.3f} s, where the simulation has loads on both sides")
-    require(end - start > 1.0, f"the simulation covers only {max(end - start, 0):.2f} s of the recording; "
-                               f"it must overlap the cut (are both on the same clock?)")
+    require(end - start > 1.0 and start <= simulation.contact_s <= end,
+            f"the simulation (contact at {simulation.contact_s:.3f} s) does not overlap recording {recording.name} "
+            f"({t[0]:.3f}-{t[-1]:.3f} s); it must cover the cut on the recording's clock")
     band = make_band(t, recording.spindle_rpm, start, end)
     require(band.t_dec.size >= 20, f"recording {recording.name} is too short to diagnose: "
                                    f"{end - start:.2f} s gives {band.t_dec.size} smoothed samples, need 20")
@@ -186,8 +188,9 @@ def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> dict:
 
 
 def diagnose(recording: Recording, simulation: TraceSimulation | ModelSimulation, cortex_mm: float,
-             progress=None, bone_mu_w: float | None = None) -> Diagnosis:
-    """Diagnose ``recording`` against ``simulation`` (see the module docstring)."""
+             bone: str | BoneSet = "bovine", progress=None) -> Diagnosis:
+    """Diagnose ``recording`` against ``simulation`` (see the module docstring). ``bone`` gives
+    μ_w for the friction reading of chip clogging when the torque cannot."""
     start = time.perf_counter()
     say = progress or (lambda message: None)
     problem, notes = build_problem(recording, simulation, cortex_mm)
@@ -204,6 +207,8 @@ def diagnose(recording: Recording, simulation: TraceSimulation | ModelSimulation
     say(f"fitted {len(fits)} mechanism subsets")
     selection = select(problem, fits)
     improved = fits[selection.subset]
+    bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
+    bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
     mechanisms = explain.mechanisms(problem, improved, selection, bone_mu_w)
     summary = summarise_fit(problem, baseline, improved)
     return Diagnosis(recording, problem, baseline, fits, selection, mismatch, mechanisms, summary,
