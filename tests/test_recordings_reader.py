@@ -102,7 +102,8 @@ BAD = [
     ("# feed_mm_s = 1.5\n# spindle_rpm = fast\ntime_s,thrust_N\n0,1\n",
      "line 2: '# spindle_rpm = fast' is not 'key = value' with a TOML value"),
     (HEADER + "# samples = 3000000000\ntime_s,thrust_N\n0,1\n", "the header claims 3,000,000,000 samples"),
-    (HEADER + "# samples = 500\ntime_s,thrust_N\n" + rows(torque=False), "header says samples = 500 but the file has 400"),
+    (HEADER + "# samples = 500\ntime_s,thrust_N\n" + rows(torque=False),
+     "header says samples = 500 but the file has 400"),
     ("\x00\x01binary", "is not a text (UTF-8) CSV file"),
 ]
 

@@ -123,10 +123,10 @@ def test_dataset_spreads_friction_like_appendix_b_and_plants_outliers():
 def test_cli_writes_a_readable_recording_and_a_dataset(tmp_path):
     out = tmp_path / "rec.csv"
     proc = run_cli("synth", "--out", str(out), "--feed", "2", "--rpm", "1000", "--clean", "--drift-N-per-s",
-                   "0.1", "--torque-unit", "Nm", "--seed", "3")
+                   "-0.1", "--torque-unit", "Nm", "--seed", "3")
     assert proc.returncode == 0, proc.stderr
     rec = read_recording(out)
-    assert rec.metadata["effects"] == ["sensor_drift"] and rec.metadata["drift_thrust_N_per_s"] == 0.1
+    assert rec.metadata["effects"] == ["sensor_drift"] and rec.metadata["drift_thrust_N_per_s"] == -0.1
     assert rec.metadata["seed"] == 3 and rec.spindle_rpm == 1000
     proc = run_cli("synth", "--dataset", str(tmp_path / "ds"), "--replicates", "2", "--quiet")
     assert proc.returncode == 0, proc.stderr

@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--torque-unit", choices=("Nmm", "Nm"), default="Nmm", help="torque column unit (Nmm)")
     p.add_argument("--depth-column", action="store_true", help="also write the tip depth depth_mm")
     p.add_argument("--clean", action="store_true", help="switch every effect off unless given below")
-    effects = p.add_argument_group("effects (0 switches an effect off)")
+    effects = p.add_argument_group("effects (0 switches an effect off; drift rates may be negative)")
     for option, _, _, default, text in EFFECT_OPTIONS:
         effects.add_argument(option, type=float, default=None, help=f"{text} ({default:g})")
     effects.add_argument("--pulsation-shape", choices=("sine", "pulse"), default="sine",
@@ -78,12 +78,12 @@ def effects_from_args(args) -> "Effects":
     values: dict[str, dict] = {name: {} for name in classes}
     for option, group, field, default, _ in EFFECT_OPTIONS:
         given = getattr(args, option.lstrip("-").replace("-", "_"))
-        require(given is None or given >= 0, f"{option} must be >= 0, got {given}")
+        require(given is None or given >= 0 or group == "drift", f"{option} must be >= 0, got {given}")
         values[group][field] = given if given is not None else (0.0 if args.clean else default)
     values["pulsation"]["shape"] = args.pulsation_shape
     chosen = {}
     for name, cls in classes.items():
-        on = any(values[name][f] > 0 for f in SWITCHES[name])
+        on = any(values[name][f] != 0 for f in SWITCHES[name])
         chosen[name] = replace(cls(), **values[name]) if on else None
     return Effects(**chosen)
 

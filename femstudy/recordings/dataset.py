@@ -10,8 +10,10 @@ force around the generating bone set's power law, with the replicate spread of A
 - cortical thickness uniform in 5.5–9 mm (Fig 5-1 shows holes of 5.5–11 mm).
 
 Rig effects are drawn per run (noise, ripple, pulsation of 0.3–3 Hz, drift). ``outliers``
-calibration runs in different conditions get a friction far off their condition's, like the
-runs the thesis removed by eye (§5.1); their headers say so (``outlier``, ``outlier_reason``).
+calibration runs in different conditions trend differently (friction far off their
+condition's, or no clogging at all), like the runs the thesis removed by eye (§5.1); they cut
+a thin cortex (5.5–6.5 mm) so that the packed flutes stay below a few hundred newtons. Their
+headers say so (``outlier``, ``outlier_reason``).
 """
 
 from __future__ import annotations
@@ -31,10 +33,11 @@ from femstudy.recordings.synthetic import Effects, FeedPulsation, Noise, SensorD
 #: Table 4-1 calibration conditions and Table 5-3 validation conditions, (f [mm/s], N [rpm]).
 CALIBRATION_CONDITIONS = ((1.0, 1000.0), (1.5, 1100.0), (1.5, 1250.0), (1.75, 1500.0), (2.0, 1500.0))
 VALIDATION_CONDITIONS = ((1.75, 1250.0), (2.0, 1000.0))
-#: (μ_f factor, μ_w factor, reason) of the planted outlier runs, used in turn.
-OUTLIER_KINDS = ((2.0, 1.0, "mu_f x2: flutes packed with chips from the previous hole"),
-                 (0.4, 1.0, "mu_f x0.4: chips evacuated freely"),
-                 (1.0, 3.0, "mu_w x3: hole wall friction tripled"))
+#: (model, μ_f factor, μ_w factor, reason) of the planted outlier runs, used in turn. Each is
+#: far outside the replicate spread (ln 2.5 = 5.4 and ln 3.5 = 7.4 standard deviations).
+OUTLIER_KINDS = (("clogging", 2.5, 1.0, "mu_f x2.5: flutes packed with chips from the previous hole"),
+                 ("allotta", 1.0, 1.0, "no chip clogging: the chips evacuated freely"),
+                 ("clogging", 1.0, 3.5, "mu_w x3.5: hole wall friction far higher"))
 
 
 @dataclass(frozen=True)
@@ -61,8 +64,11 @@ def random_effects(rng: np.random.Generator) -> Effects:
 
 def dataset_recordings(bone: str | BoneSet = "bovine", replicates: int = 10, validation_replicates: int = 2,
                        outliers: int = 3, seed: int = 0, spread: Spread = Spread(),
-                       sample_rate_hz: float = 1000.0) -> list[tuple[str, Recording]]:
-    """(relative path, recording) of every run; deterministic for a given seed."""
+                       sample_rate_hz: float = 1000.0, effects=random_effects) -> list[tuple[str, Recording]]:
+    """(relative path, recording) of every run; deterministic for a given seed.
+
+    ``effects(rng) -> Effects`` draws each run's rig imperfections (default :func:`random_effects`).
+    """
     bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
     rng = np.random.default_rng(seed)
     plan = [("calibration", c, r) for c in CALIBRATION_CONDITIONS for r in range(1, replicates + 1)]
@@ -81,16 +87,18 @@ def dataset_recordings(bone: str | BoneSet = "bovine", replicates: int = 10, val
         mu_w = mu_w0 * np.exp(spread.ln_mu_w * rng.standard_normal())
         u1 = bone_set.u1_MPa * np.exp(spread.ln_initial_force * rng.standard_normal())
         kind = outlier_runs.get(((feed, rpm), replicate)) if role == "calibration" else None
+        cortex = float(rng.uniform(*spread.cortex_mm))
         if kind:
-            mu_f, mu_w = mu_f * kind[0], mu_w * kind[1]
+            mu_f, mu_w = mu_f * kind[1], mu_w * kind[2]
+            cortex = spread.cortex_mm[0] + (cortex - spread.cortex_mm[0]) * 1.0 / np.ptp(spread.cortex_mm)
         extra = {"role": role, "replicate": replicate, "condition_mu_f": float(mu_f0),
                  "condition_mu_w": float(mu_w0), "outlier": kind is not None,
-                 "outlier_reason": kind[2] if kind else ""}
-        rec = synthesize(feed, rpm, cortex_mm=float(rng.uniform(*spread.cortex_mm)), bone=bone_set,
+                 "outlier_reason": kind[3] if kind else ""}
+        rec = synthesize(feed, rpm, cortex_mm=cortex, bone=bone_set, model=kind[0] if kind else "clogging",
                          mu_f=float(mu_f), mu_w=float(mu_w), u1_MPa=float(u1),
                          u2_MPa=float(bone_set.u2_MPa * u1 / bone_set.u1_MPa),
                          sample_rate_hz=sample_rate_hz, approach_s=float(rng.uniform(1.5, 3.0)),
-                         tail_s=float(rng.uniform(1.5, 3.0)), effects=random_effects(rng),
+                         tail_s=float(rng.uniform(1.5, 3.0)), effects=effects(rng),
                          seed=int(rng.integers(2**31)), specimen=f"synthetic {bone_set.name} femur",
                          metadata=extra)
         runs.append((f"{role}/f{feed:g}_N{rpm:g}_r{replicate:02d}.csv", rec))

@@ -167,16 +167,16 @@ def check_recording(rec: Recording, line_of=None) -> None:
     where = (lambda row: f"line {line_of(row)}") if line_of else (lambda row: f"row {row + 1}")
     n = rec.time_s.size
     require(n > 0, f"recording {name} has a column line but no data rows")
-    declared = rec.metadata.get("samples")
-    require(declared is None or declared == n,
-            f"recording {name}: the header says samples = {declared} but the file has {n} data "
-            f"rows (truncated?)")
     for label, values in (("time_s", rec.time_s), ("thrust_N", rec.thrust_N), ("torque", rec.torque_Nmm),
                           ("depth_mm", rec.depth_mm), ("fx_N", rec.fx_N), ("fy_N", rec.fy_N)):
         if values is not None and not np.all(np.isfinite(values)):
             row = int(np.flatnonzero(~np.isfinite(values))[0])
             raise UserError(f"recording {name}: {label} is {values[row]} at {where(row)}; every value "
                             f"must be a finite number")
+    declared = rec.metadata.get("samples")
+    require(declared is None or declared == n,
+            f"recording {name}: the header says samples = {declared} but the file has {n} data "
+            f"rows (truncated?)")
     require(n >= 3, f"recording {name} has only {n} data rows")
     steps = np.diff(rec.time_s)
     if np.any(steps <= 0):
