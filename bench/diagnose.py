@@ -3,7 +3,9 @@
     PYTHONPATH=. python bench/diagnose.py --seed 2 --per-class 6
 
 Each case is drawn by :func:`femstudy.diagnosis.cases.make_case` (classes and ranges are in
-that module's docstring) from the seed; one in five has no torque channel. Prints one line per
+that module's docstring) from the seed; one in five has no torque channel ("no-T"), and one in
+three is diagnosed against the load model (``--model``, cut detected on the recording)
+instead of the simulated trace ("model"). Prints one line per
 case, then precision / recall / F1 per mechanism, the exact-set accuracy, false alarms on
 complete simulations, the fit improvement (thrust R² over the cut, before → after) and the
 time per case. Tuned on seed 1; reported on seed 2.
@@ -19,20 +21,29 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from femstudy.diagnosis import inputs  # noqa: E402
 from femstudy.diagnosis.baseline import TraceSimulation  # noqa: E402
 from femstudy.diagnosis.cases import CLASSES, make_case  # noqa: E402
 from femstudy.diagnosis.diagnose import diagnose  # noqa: E402
 from femstudy.diagnosis.mechanisms import MECHANISMS  # noqa: E402
+from femstudy.drilling.friction import load_bone_set  # noqa: E402
+
+BONE = load_bone_set("bovine")
 
 SHORT = {"chip_clogging": "clog", "feed_pulsation": "puls", "sensor_drift": "drift", "thermal_softening": "soft"}
 
 
-def run_case(kind: str, seed: int, torque: bool):
+def run_case(kind: str, seed: int, torque: bool, model: bool):
+    """Diagnose one case against its simulated trace or (``model``) the load model; the time
+    includes detecting the cut for the load model."""
     case = make_case(kind, seed, torque=torque)
     rec = case.recording
-    sim = TraceSimulation.from_recording(case.simulation, rec.spindle_rpm)
     start = time.perf_counter()
-    d = diagnose(rec, sim, float(rec.metadata["cortex_mm"]))
+    if model:
+        sim, cortex = inputs.model_simulation(rec, case.simulation_model, BONE, None)
+    else:
+        sim, cortex = TraceSimulation.from_recording(case.simulation, rec.spindle_rpm), rec.metadata["cortex_mm"]
+    d = diagnose(rec, sim, float(cortex), BONE)
     return case, d, time.perf_counter() - start
 
 
@@ -48,13 +59,14 @@ def main() -> int:
     for k, kind in enumerate(kinds):
         for i in range(args.per_class):
             seed = args.seed * 100_000 + k * 1000 + i
-            case, d, seconds = run_case(kind, seed, torque=(i % 5 != 4))
+            case, d, seconds = run_case(kind, seed, torque=(i % 5 != 4), model=(i % 3 == 2))
             found = d.selection.subset
             fit = d.fit_summary["thrust_N"]
             rec = case.recording
             rows.append((case, found, fit, seconds, rec.duration_s, rec.sample_rate_hz, d))
             show = lambda s: "+".join(sorted(SHORT[m] for m in s)) or "-"
-            print(f"{case.name + ('' if rec.torque_Nmm is not None else ' (no torque)'):34s} {show(case.truth):18s} "
+            label = case.name + (" model" if i % 3 == 2 else "") + ("" if rec.torque_Nmm is not None else " no-T")
+            print(f"{label:34s} {show(case.truth):18s} "
                   f"{show(found):18s} {'yes' if found == case.truth else 'NO ':3s} "
                   f"{fit['baseline']['r2']:7.3f} -> {fit['improved']['r2']:6.4f} {rec.duration_s:6.1f} "
                   f"{rec.sample_rate_hz:5.0f} {seconds:6.2f}", flush=True)

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from conftest import assert_clean_failure, run_cli
-from femstudy.recordings import Effects, FeedPulsation, Noise, SpindleRipple, synthesize, write_recording
+from femstudy.recordings import (Effects, FeedPulsation, Noise, SpindleRipple, ThermalSoftening, synthesize,
+                                 write_recording)
 
 NUISANCE = dict(noise=Noise(0.3, 1.0), ripple=SpindleRipple(0.05), drift=None, softening=None)
 
@@ -109,3 +110,20 @@ def test_no_torque_in_the_recording_diagnoses_thrust_alone(files, tmp_path):
     assert [m["mechanism"] for m in js["missing_physics"]] == ["chip_clogging"]
     assert set(js["fit"]["channels"]) == {"thrust_N"} and set(js["noise"]) == {"thrust_N"}
     assert np.isclose(js["noise"]["thrust_N"], 0.3, rtol=0.05)
+
+
+def test_load_model_path_finds_softening_and_is_silent_when_complete(tmp_path):
+    """--model: the bone set's load model from the detected contact; friction of the bone set."""
+    quiet = synthesize(1.5, 1500, effects=Effects(**NUISANCE, pulsation=None), seed=9, approach_s=1.5)
+    soft = synthesize(1.5, 1500, effects=Effects(**{**NUISANCE, "softening": ThermalSoftening(0.2, 1.5)},
+                                                 pulsation=None), seed=10, approach_s=1.5)
+    for name, rec, expected in (("quiet", quiet, []), ("soft", soft, ["thermal_softening"])):
+        write_recording(tmp_path / f"{name}.csv", rec)
+        out = tmp_path / f"{name}.json"
+        proc = run_cli("diagnose", str(tmp_path / f"{name}.csv"), "--model", "clogging", "--json", str(out), "--quiet")
+        assert proc.returncode == 0, proc.stderr
+        js = json.loads(out.read_text())
+        assert [m["mechanism"] for m in js["missing_physics"]] == expected, js["selection"]
+        assert "load model 'clogging'" in proc.stdout
+    p = js["missing_physics"][0]["parameters"]
+    assert p["fraction"] == pytest.approx(0.2, rel=0.1) and p["time_constant_s"] == pytest.approx(1.5, rel=0.25)

@@ -29,6 +29,8 @@ from femstudy.recordings.reader import Recording
 
 #: Shifts tried before the alignment is refined [s].
 SHIFT_GRID_S = np.arange(-0.3, 0.3001, 0.01)
+#: A load model's stop is refined within ± this time [s] of the detected one.
+STOP_SCAN_S = 0.3
 #: Huber threshold of the robust alignment, in noise units.
 HUBER_Z = 3.0
 #: Fewest unloaded instants from which a tare is taken.
@@ -143,7 +145,8 @@ def align(problem: Problem) -> Fit:
     params = {"shift_s": 0.0}
     if sim.stop_is_parameter:
         params["stop_depth_mm"] = sim.stop_depth_mm
-        depths = np.arange(0.2, sim.max_depth_mm, problem.geometry.feed_mm_s * 0.02)
+        f = problem.geometry.feed_mm_s
+        depths = sim.stop_depth_mm + f * np.arange(-STOP_SCAN_S, STOP_SCAN_S + 1e-9, 0.01)
     for _ in range(2 if sim.stop_is_parameter else 1):
         params["shift_s"] = min(SHIFT_GRID_S, key=lambda s: cost({**params, "shift_s": s}))
         if sim.stop_is_parameter:

@@ -45,6 +45,19 @@ class Fit:
         return float(self.chi2.sum())
 
 
+def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least squares for a few columns (tare, drift ramp, clogging torque): normal equations,
+    or the SVD when a column is (nearly) zero, e.g. the clogging column at p = 0."""
+    G = A.T @ A
+    d = np.diag(G)
+    if d.min() > 1e-10 * d.max():
+        try:
+            return np.linalg.solve(G, A.T @ b)
+        except np.linalg.LinAlgError:
+            pass
+    return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
 def _solve(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray | None = None):
     """Weighted residual vector, linear parameters and smoothed model for nonlinear ``params``."""
     parts = problem.design(subset, params)
@@ -55,9 +68,9 @@ def _solve(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray |
         use = slice(None) if rows is None else rows
         target = (problem.y[c] - base) * w
         Aw = A * w[:, None]
-        beta = np.linalg.lstsq(Aw[use], target[use], rcond=None)[0]
+        beta = _lstsq(Aw[use], target[use])
         if names[c][-1] == "torque_gain_Nmm_per_N" and beta[-1] < 0:  # k_T = R μ_w l_w / M ≥ 0
-            beta = np.append(np.linalg.lstsq(Aw[use][:, :-1], target[use], rcond=None)[0], 0.0)
+            beta = np.append(_lstsq(Aw[use][:, :-1], target[use]), 0.0)
         linear.update(zip(names[c], beta))
         residuals.append(target - Aw @ beta)
         model.append(base + A @ beta)
@@ -71,7 +84,6 @@ def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np
     best = None
     for start in starts:
         x0 = np.clip([start[n] for n in names], lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-        x0 = np.where(np.isfinite(x0), x0, lo)
 
         def fun(x):
             res, _, _ = _solve(problem, subset, dict(zip(names, x)), rows)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+from scipy import ndimage
+
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.drilling.history import DrillingConditions
 from femstudy.errors import UserError, require
@@ -53,15 +56,42 @@ def sim_header_value(note: str) -> str:
     return note.split(" overrides ", 1)[1].rsplit(" in the header", 1)[0]
 
 
+def feed_stop_s(rec: Recording, after_s: float) -> float:
+    """When the feed stopped in cancellous bone, after ``after_s`` (the cone through the cortex).
+
+    The small cancellous cutting load vanishes within one revolution when the feed stops: the
+    thrust, averaged over one revolution (ripple gone), is fitted over [after_s, end] by a
+    level + a linear trend (a drifting sensor) + a downward step at t_s, for t_s on a 10 ms
+    grid; the least-squares t_s wins. Without such a step (the drill stopped at breakthrough)
+    the answer is ``after_s``."""
+    t, F = rec.time_s, rec.thrust_N
+    revolution = max(1, int(round(60.0 / rec.spindle_rpm * rec.sample_rate_hz)))
+    smooth = ndimage.uniform_filter1d(F, revolution)
+    step = max(1, int(round(0.01 * rec.sample_rate_hz)))
+    keep = np.flatnonzero(t >= after_s)[::step]
+    if keep.size < 10:
+        return after_s
+    tt, ff = t[keep], smooth[keep]
+    best, best_t = np.inf, after_s
+    for k in range(2, tt.size - 2):
+        A = np.column_stack([np.ones_like(tt), tt - tt[0], (np.arange(tt.size) < k).astype(float)])
+        coef, *_ = np.linalg.lstsq(A, ff, rcond=None)
+        sse = float(np.sum((A @ coef - ff) ** 2))
+        if coef[2] > 0 and sse < best:
+            best, best_t = sse, float(tt[k])
+    return best_t
+
+
 def model_simulation(rec: Recording, model: str, bone, cortex_mm: float | None) -> tuple[ModelSimulation, float]:
     """Load model ``model`` for the recording's conditions, from its detected contact to its stop."""
     require(model in DIAGNOSED_MODELS, f"--model must be one of {', '.join(DIAGNOSED_MODELS)}, got '{model}'")
     phase = cut_phase(rec)
     cortex = cortex_thickness(rec, cortex_mm, phase)
     cond = DrillingConditions(rec.feed_mm_s, rec.spindle_rpm, cortex, bone, rec.drill)
-    stop_depth = rec.feed_mm_s * (phase.end_s - phase.contact_s)
-    if phase.end_kind == "breakthrough":  # the drill went on into cancellous bone: stop unknown
-        stop_depth = cortex + rec.drill.cone_length_mm
+    stop_s = phase.end_s
+    if phase.end_kind == "breakthrough":  # the drill went on into cancellous bone
+        stop_s = feed_stop_s(rec, phase.end_s + rec.drill.cone_length_mm / rec.feed_mm_s)
+    stop_depth = rec.feed_mm_s * (stop_s - phase.contact_s)
     sim = ModelSimulation(model, cond, phase.contact_s, stop_depth,
                           with_torque=rec.torque_Nmm is not None,
                           max_depth_mm=rec.feed_mm_s * (rec.time_s[-1] - phase.contact_s))

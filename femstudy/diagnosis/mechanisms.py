@@ -41,7 +41,7 @@ MECHANISMS = ("chip_clogging", "feed_pulsation", "sensor_drift", "thermal_soften
 #: Nonlinear parameters: name -> (lower, upper, mechanism or None for alignment).
 NONLINEAR = {
     "shift_s": (-0.5, 0.5, None),
-    "stop_depth_mm": (0.0, math.inf, None),
+    "stop_depth_mm": (0.1, None, None),  # upper bound: see Problem.bounds
     "growth_exponent": (0.0, 5.0, "chip_clogging"),
     "pulsation_a": (-0.7, 0.7, "feed_pulsation"),
     "pulsation_b": (-0.7, 0.7, "feed_pulsation"),
@@ -110,8 +110,11 @@ class Problem:
         return out
 
     def bounds(self, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
-        lo = np.array([NONLINEAR[n][0] for n in names])
-        hi = np.array([NONLINEAR[n][1] for n in names])
+        """Lower and upper bounds; a load model's stop lies between 0.1 mm and the deepest the
+        drill can have gone in the recording."""
+        limits = {**NONLINEAR, "stop_depth_mm": (0.1, getattr(self.simulation, "max_depth_mm", None) or 100.0, None)}
+        lo = np.array([limits[n][0] for n in names])
+        hi = np.array([limits[n][1] for n in names])
         return lo, hi
 
     def terms(self, params: dict, t: np.ndarray | None = None) -> dict:
