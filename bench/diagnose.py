@@ -7,8 +7,10 @@ that module's docstring) from the seed; one in five has no torque channel ("no-T
 three is diagnosed against the load model (``--model``, cut detected on the recording)
 instead of the simulated trace ("model"). Prints one line per
 case, then precision / recall / F1 per mechanism, the exact-set accuracy, false alarms on
-complete simulations, the fit improvement (thrust R² over the cut, before → after) and the
-time per case. Tuned on seed 1; reported on seed 2.
+complete simulations, the fit improvement (thrust R² over the cut, before → after), the
+recovered parameters against the truth and the time per case (``--timing``: one 20 s, 1 kHz
+recording per class). Tuned on seed 1; reported on seed 2. Times are wall-clock on a shared
+machine.
 """
 
 from __future__ import annotations
@@ -33,10 +35,20 @@ BONE = load_bone_set("bovine")
 SHORT = {"chip_clogging": "clog", "feed_pulsation": "puls", "sensor_drift": "drift", "thermal_softening": "soft"}
 
 
-def run_case(kind: str, seed: int, torque: bool, model: bool):
+#: (true parameter, mechanism, reported parameter) compared in the recovery table
+RECOVERED = [("growth_exponent", "chip_clogging", "growth_exponent_per_diameter"),
+             ("mu_f", "chip_clogging", "implied_mu_f"),
+             ("amplitude", "feed_pulsation", "amplitude"), ("frequency_hz", "feed_pulsation", "frequency_hz"),
+             ("thrust_N_per_s", "sensor_drift", "thrust_N_per_s"),
+             ("torque_Nmm_per_s", "sensor_drift", "torque_Nmm_per_s"),
+             ("fraction", "thermal_softening", "fraction"),
+             ("time_constant_s", "thermal_softening", "time_constant_s")]
+
+
+def run_case(kind: str, seed: int, torque: bool, model: bool, duration_s: float | None = None):
     """Diagnose one case against its simulated trace or (``model``) the load model; the time
     includes detecting the cut for the load model."""
-    case = make_case(kind, seed, torque=torque)
+    case = make_case(kind, seed, torque=torque, duration_s=duration_s)
     rec = case.recording
     start = time.perf_counter()
     if model:
@@ -52,6 +64,7 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=2, help="benchmark seed (tuning used 1)")
     parser.add_argument("--per-class", type=int, default=6, help="cases per class")
     parser.add_argument("--only", help="run one class")
+    parser.add_argument("--timing", action="store_true", help="also time one 20 s, 1 kHz recording per class")
     args = parser.parse_args()
     kinds = [args.only] if args.only else list(CLASSES)
     rows = []
@@ -78,7 +91,7 @@ def main() -> int:
         fn = sum(1 for c, f, *_ in rows if m not in f and m in c.truth)
         precision = tp / (tp + fp) if tp + fp else float("nan")
         recall = tp / (tp + fn) if tp + fn else float("nan")
-        f1 = 2 * tp / (2 * tp + fp + fn) if tp else 0.0
+        f1 = 2 * tp / (2 * tp + fp + fn) if tp + fp + fn else float("nan")
         print(f"{m:20s} {tp:4d} {fp:4d} {fn:4d} {precision:10.3f} {recall:7.3f} {f1:6.3f}")
     exact = sum(1 for c, f, *_ in rows if f == c.truth)
     complete = [(c, f) for c, f, *_ in rows if not c.truth]
@@ -89,11 +102,32 @@ def main() -> int:
     print(f"thrust R2 over the cut  median {statistics.median(r[2]['baseline']['r2'] for r in missing):.3f} -> "
           f"{statistics.median(r[2]['improved']['r2'] for r in missing):.4f} (cases with missing physics); "
           f"worst after {min(r[2]['improved']['r2'] for r in missing):.4f}")
+    print(f"mismatch intervals on complete cases: {sum(len(r[6].mismatch) for r in rows if not r[0].truth)}")
+    print(f"\n{'parameter (found cases)':32s} {'n':>3s} {'median |rel err|':>17s} {'max':>8s}")
+    for true_key, mech, key in RECOVERED:
+        errors = []
+        for case, found, fit, *_, d in rows:
+            reported = {m["mechanism"]: m["parameters"] for m in d.mechanisms}.get(mech, {})
+            if true_key in case.true and key in reported and mech in case.truth:
+                if true_key == "mu_f" and case.recording.torque_Nmm is None:
+                    continue  # without torque μ_f rests on the bone set's μ_w
+                errors.append(abs(reported[key] / case.true[true_key] - 1))
+        if errors:
+            print(f"{mech + ': ' + key:32s} {len(errors):3d} {statistics.median(errors):17.4f} {max(errors):8.4f}")
     times = [r[3] for r in rows]
     per20 = [r[3] * 20.0 / r[4] for r in rows if r[5] > 900]
     print(f"time per case           mean {statistics.mean(times):.2f} s, max {max(times):.2f} s; "
           f"scaled to a 20 s recording at 1 kHz: mean {statistics.mean(per20):.2f} s, max {max(per20):.2f} s")
     print(f"recordings              {min(r[4] for r in rows):.1f}-{max(r[4] for r in rows):.1f} s long")
+    if args.timing:
+        print("\n20 s recordings at 1 kHz, one per class, simulated trace and load model:")
+        for k, kind in enumerate(kinds):
+            line = []
+            for model in (False, True):
+                case, d, seconds = run_case(kind, args.seed * 100_000 + 90_000 + k, True, model, duration_s=20.0)
+                ok = "ok" if d.selection.subset == case.truth else "WRONG"
+                line.append(f"{'model' if model else 'trace'} {seconds:5.2f} s ({ok})")
+            print(f"  {kind:30s} {case.recording.duration_s:5.1f} s  " + "   ".join(line), flush=True)
     return 0
 
 

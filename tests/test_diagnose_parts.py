@@ -45,18 +45,20 @@ def test_smoothing_is_the_same_on_recording_samples_and_on_the_model_grid():
     assert band.correlation == pytest.approx(math.exp(-3.5 ** 2 / 4))
 
 
-def test_forward_model_reproduces_the_generator_at_the_true_parameters():
+@pytest.mark.parametrize("shape", ["sine", "pulse"])
+def test_forward_model_reproduces_the_generator_at_the_true_parameters(shape):
     """Pulsed feed (depth lead and load scaling), clogging and softening, against an Allotta
     trace: equal to the synthetic recording to 1 mN except at the two samples where the feed stops."""
     A, f_p, phase = 0.3, 0.7, 1.1
     for stop in (None, 4.0):  # through the cortex, and retraction inside it
-        effects = Effects(None, None, FeedPulsation(A, f_p, phase), None, ThermalSoftening(0.2, 1.5))
+        effects = Effects(None, None, FeedPulsation(A, f_p, phase, shape), None, ThermalSoftening(0.2, 1.5))
         rec = synthesize(1.5, 1500, mu_f=0.07, effects=effects, stop_depth_mm=stop)
         sim = synthesize(1.5, 1500, mu_f=0.07, model="allotta", effects=Effects.none(), stop_depth_mm=stop)
         problem, _ = build_problem(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
         params = {"shift_s": 0.0, "growth_exponent": rec.metadata["true_growth_exponent"],
                   "pulsation_a": A * math.cos(phase), "pulsation_b": A * math.sin(phase),
-                  "pulsation_frequency_hz": f_p, "softening_fraction": 0.2, "softening_log10_tau_s": math.log10(1.5)}
+                  "pulsation_frequency_hz": f_p, "softening_fraction": 0.2, "softening_log10_tau_s": math.log10(1.5),
+                  "pulsation_sharpness": 3.0 if shape == "pulse" else 0.0}  # the generator's tanh(3 sin)/tanh 3
         model = problem.terms(params, t=rec.time_s)["thrust_N"]
         off = np.abs(rec.thrust_N - model) > 1e-3
         assert np.count_nonzero(off) <= 2
@@ -114,3 +116,17 @@ def test_mismatch_intervals_silent_on_noise_and_located_on_a_bump():
     assert interval["significance"] > 50 and interval["channel"] == "thrust_N"
     z[50] = 1e4  # far beyond the floating-point range of the exact tail: still a finite significance
     assert all(math.isfinite(i["significance"]) for i in mismatch_intervals(t, z, 0.9, "thrust_N"))
+
+
+def test_mis_scaled_simulation_is_a_calibration_not_missing_physics():
+    """A simulation with a 5 % low cortical cutting energy u1: located as a mismatch, explained
+    by the scale on the simulated loads (calibration), no mechanism reported."""
+    from femstudy.diagnosis.diagnose import diagnose
+
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), SpindleRipple(0.05), None, None, None), seed=4)
+    sim = synthesize(1.5, 1500, u1_MPa=0.95 * 448.5, effects=Effects.none(), sample_rate_hz=500)
+    d = diagnose(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
+    js = d.to_json()
+    assert js["missing_physics"] == [] and js["mismatch"]
+    assert js["calibration"]["thrust_N_scale"] == pytest.approx(1 / 0.95, rel=0.01)
+    assert js["calibration"]["torque_Nmm_scale"] == pytest.approx(1 / 0.95, rel=0.01)

@@ -18,6 +18,8 @@ softening                  thermal softening 10–35 %, τ 0.5–5 s            
 pulsation                  feed pulsation 5–40 % at 0.2–3 Hz                    clogging
 drift                      drift ±0.03–0.3 N/s, ±0.1–1 N·mm/s                    clogging
 softening_and_drift        both of the above                                    clogging
+pulse_feed_clogging_       clogging rise 20–40 %, pulse-shaped feed pulsation   Allotta
+softening                  10–40 % at 0.3–3 Hz, softening 10–35 %
 complete                   nothing                                              the same model
 =========================  ==================================================  ====================
 
@@ -47,6 +49,7 @@ CLASSES = {
     "pulsation": frozenset({"feed_pulsation"}),
     "drift": frozenset({"sensor_drift"}),
     "softening_and_drift": frozenset({"thermal_softening", "sensor_drift"}),
+    "pulse_feed_clogging_softening": frozenset({"chip_clogging", "feed_pulsation", "thermal_softening"}),
     "complete": frozenset(),
 }
 
@@ -70,8 +73,9 @@ def mu_f_for_growth(p: float, mu_w: float, drill: Drill = Drill()) -> float:
     return M / (drill.flute_length_sum_mm + drill.wall_mm * mu_w * math.sin(math.radians(drill.face_angle_deg)))
 
 
-def make_case(kind: str, seed: int, torque: bool = True) -> Case:
-    """One random case of class ``kind`` (deterministic for a given seed)."""
+def make_case(kind: str, seed: int, torque: bool = True, duration_s: float | None = None) -> Case:
+    """One random case of class ``kind`` (deterministic for a given seed); ``duration_s`` sets
+    the recording's length at 1 kHz (the time before contact and after retraction shared equally)."""
     rng = np.random.default_rng(seed)
     u = rng.uniform
     f, n = u(0.8, 2.0), u(1000, 2000)
@@ -83,7 +87,7 @@ def make_case(kind: str, seed: int, torque: bool = True) -> Case:
     drill, true = Drill(), {}
     z_max = (cortex - drill.cone_length_mm) / drill.diameter_mm
     sim_model = "clogging"
-    if kind in ("clogging_under_pulsation", "clogging_hidden_by_drift"):
+    if kind in ("clogging_under_pulsation", "clogging_hidden_by_drift", "pulse_feed_clogging_softening"):
         rise = u(0.2, 0.4)
         mu_f = mu_f_for_growth(math.log1p(rise) / z_max, mu_w, drill)
         sim_model = "allotta"
@@ -97,7 +101,10 @@ def make_case(kind: str, seed: int, torque: bool = True) -> Case:
     if kind == "pulsation":
         effects = replace(effects, pulsation=FeedPulsation(u(0.05, 0.4), math.exp(u(math.log(0.2), math.log(3.0))),
                                                            u(0, 2 * math.pi)))
-    if kind in ("softening", "softening_and_drift"):
+    if kind == "pulse_feed_clogging_softening":
+        effects = replace(effects, pulsation=FeedPulsation(u(0.1, 0.4), math.exp(u(math.log(0.3), math.log(3.0))),
+                                                           u(0, 2 * math.pi), "pulse"))
+    if kind in ("softening", "softening_and_drift", "pulse_feed_clogging_softening"):
         effects = replace(effects, softening=ThermalSoftening(u(0.1, 0.35), math.exp(u(math.log(0.5), math.log(5.0)))))
     if kind in ("drift", "softening_and_drift"):
         effects = replace(effects, drift=SensorDrift(rng.choice([-1, 1]) * u(0.03, 0.3),
@@ -107,6 +114,9 @@ def make_case(kind: str, seed: int, torque: bool = True) -> Case:
     rec_model = sim_model if kind == "complete" else "clogging"
     approach, tail = u(1.0, 4.0), u(1.0, 4.0)
     rate = float(rng.choice([500.0, 1000.0]))
+    if duration_s is not None:
+        approach = tail = (duration_s - (cortex + 2.0) / f) / 2
+        rate = 1000.0
     common = dict(cortex_mm=cortex, mu_f=mu_f, mu_w=mu_w)
     if kind == "clogging_hidden_by_drift":
         clean = synthesize(f, n, **common, effects=Effects.none(), approach_s=approach, tail_s=tail)

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from femstudy.diagnosis.fit import Fit
-from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.mechanisms import Problem, feed_modulation
 from femstudy.diagnosis.select import Selection, effect_sizes
 
 
@@ -34,6 +34,11 @@ def alignment(problem: Problem, fit: Fit) -> dict:
     return out
 
 
+def calibration(problem: Problem, fit: Fit) -> dict:
+    """The scale on each channel's simulated cutting load in the improved fit (1 = as simulated)."""
+    return {f"{c}_scale": round(fit.params.get(f"{c}_scale", 1.0), 4) for c in problem.channels}
+
+
 def _r(x, digits=4):
     return float(f"{x:.{digits}g}")
 
@@ -43,9 +48,9 @@ def clogging(problem: Problem, fit: Fit, bone_mu_w: float | None) -> tuple[dict,
     drill = g.drill
     z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
     growth = p["growth_exponent"]
-    F_o = problem.initial_force_N
+    F_o = problem.initial_force_N * p.get("thrust_N_scale", 1.0)  # the recording's initial force
     excess = F_o * math.expm1(growth * z_max)
-    at_breakthrough = float(sim.loads(np.array([sim.contact_s + g.cortex_mm / g.feed_mm_s]))[0][0])
+    at_breakthrough = float(sim.loads(np.array([sim.contact_s + g.cortex_mm / g.feed_mm_s]))[0][0]) * F_o / problem.initial_force_N
     own_growth = math.log(max(at_breakthrough, 1e-12) / F_o) / z_max if z_max > 0 else 0.0
     total = math.log(max(at_breakthrough + excess, 1e-12) / F_o) / z_max if z_max > 0 else growth
     M = total * drill.flute_area_mm2 / (drill.eta * drill.diameter_mm)
@@ -87,14 +92,24 @@ def pulsation(problem: Problem, fit: Fit) -> tuple[dict, str]:
     A = math.hypot(p["pulsation_a"], p["pulsation_b"])
     f_p = p["pulsation_frequency_hz"]
     phase = math.atan2(p["pulsation_b"], p["pulsation_a"])
-    lead = A * g.feed_mm_s / (2 * math.pi * f_p)
+    t = np.linspace(0.0, 1.0 / f_p, 400)
+    m, lead = feed_modulation(p, t, 0.0)
+    depth = g.feed_mm_s * np.ptp(lead) / 2
+    kappa = p.get("pulsation_sharpness", 0.0)
     params = {"amplitude": _r(A), "frequency_hz": _r(f_p), "phase_rad": _r(phase), "period_s": _r(1 / f_p),
-              "depth_amplitude_mm": _r(lead), "thrust_amplitude_N": _r(A * problem.initial_force_N)}
+              "waveform": "pulse" if fit.pulse else "sine", "depth_amplitude_mm": _r(depth),
+              "thrust_amplitude_N": _r(A * problem.initial_force_N * p.get("thrust_N_scale", 1.0))}
+    sign = "+" if phase >= 0 else "−"
+    if fit.pulse:
+        params["sharpness"] = _r(kappa)
+        law = (f"f(t) = f·(1 + {A:.3g}·tanh({kappa:.2g}·sin(2π·{f_p:.3g}·t {sign} {abs(phase):.2f}))"
+               f"/tanh({kappa:.2g})), fast and slow halves rather than a sine")
+    else:
+        law = f"f(t) = f·(1 + {A:.3g}·sin(2π·{f_p:.3g}·t {sign} {abs(phase):.2f}))"
     text = (f"The loads in contact oscillate at {f_p:.3g} Hz (period {1 / f_p:.3g} s) by ±{100 * A:.0f} % "
-            f"(±{A * problem.initial_force_N:.3g} N of thrust at full engagement): the feed pulsates, "
-            f"f(t) = f·(1 + {A:.3g}·sin(2π·{f_p:.3g}·t {'+' if phase >= 0 else '−'} {abs(phase):.2f})), so the "
-            f"drill runs up to {1000 * lead:.0f} µm ahead of and behind the nominal depth. This is the "
-            f"pulse-type feeding of a drive or slide that binds (thesis §4.5.2), not a property of the bone.")
+            f"(±{params['thrust_amplitude_N']:.3g} N of thrust at full engagement): the feed pulsates, {law}, so "
+            f"the drill runs up to {1000 * depth:.0f} µm ahead of and behind the nominal depth. This is the "
+            f"pulse-type feeding of a drive or slide that binds (thesis §4.5.3), not a property of the bone.")
     return params, text
 
 

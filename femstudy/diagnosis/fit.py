@@ -10,8 +10,9 @@ Starting points: the pulsation frequency is multimodal, so a scan over frequenci
 Hz) fits the exact linearisation of the pulsation term in (a, b) — load modulation plus depth
 lead — together with linear stand-ins for the other mechanisms, one small linear solve per
 frequency; its best local maxima start separate fits. Softening's time constant is seeded by a
-scan of the same kind. Each subset is also started from the fits of its subsets with one
-mechanism fewer; the best optimum is kept.
+scan of the same kind. Each subset is also started from the best fit of its subsets with one
+mechanism fewer; the best optimum is kept. The pulse-shaped pulsation is fitted only where the
+sine leaves more than noise (:func:`fit_all`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ FREQUENCY_GRID_HZ = np.geomspace(0.15, 3.5, 240)
 TAU_GRID_S = np.geomspace(0.2, 40.0, 16)
 NOMINAL_GROWTH = 0.5
 FREQUENCY_STARTS = 3
+#: χ²/dof of the all-mechanism fit above which the pulse-shaped pulsation is tried.
+PULSE_GATE = 2.0
+#: BIC gain beyond its parameter's cost that the pulse shape must bring.
+MIN_PULSE_GAIN = 10.0
 
 
 @dataclass
@@ -39,6 +44,7 @@ class Fit:
     chi2: np.ndarray             # per channel (weighted by the noise of each sample)
     model: np.ndarray            # smoothed model, channels × instants
     n_params: int
+    pulse: bool = False          # the pulsation is pulse-shaped (sharpness fitted)
 
     @property
     def chi2_total(self) -> float:
@@ -74,12 +80,15 @@ def _solve(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray |
         linear.update(zip(names[c], beta))
         residuals.append(target - Aw @ beta)
         model.append(base + A @ beta)
+    if "torque_gain_Nmm_per_N" in linear:  # per newton of recorded extra thrust, g_F·C
+        linear["torque_gain_Nmm_per_N"] /= linear.get("thrust_N_scale", 1.0) or 1.0
     return residuals, linear, np.vstack(model)
 
 
-def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np.ndarray | None = None) -> Fit:
+def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np.ndarray | None = None,
+               pulse: bool = False) -> Fit:
     """The best of several bounded least-squares fits of one subset."""
-    names = problem.nonlinear_names(subset)
+    names = problem.nonlinear_names(subset, pulse)
     lo, hi = problem.bounds(names)
     best = None
     for start in starts:
@@ -97,7 +106,7 @@ def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np
     res, linear, model = _solve(problem, subset, params, rows)
     chi2 = np.array([float(np.sum((r if rows is None else r[rows]) ** 2)) for r in res])
     n_linear = sum(len(n) for n in problem.linear_names(subset))
-    return Fit(subset, {**params, **linear}, chi2, model, len(names) + n_linear)
+    return Fit(subset, {**params, **linear}, chi2, model, len(names) + n_linear, pulse)
 
 
 def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list[np.ndarray]:
@@ -126,17 +135,19 @@ def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list
 
 
 def _stand_in_columns(problem: Problem, base_params: dict, tau_s: float) -> list[np.ndarray]:
-    """Linear stand-ins per channel: tare, drift ramp, clogging at p = 0.5, softening at τ_s."""
+    """Linear stand-ins per channel: the alignment's columns (scale, tare), a drift ramp,
+    clogging at p = 0.5 and softening at τ_s."""
     terms = problem.terms({**base_params, "growth_exponent": NOMINAL_GROWTH})
     plain = problem.terms(base_params)
     t = problem.band.t_model
     t_contact = problem.simulation.contact_s + base_params["shift_s"]
     soft = -np.expm1(-np.maximum(t - t_contact, 0.0) / tau_s)
+    aligned = problem.design(frozenset(), base_params)
     cols = []
-    for c in problem.channels:
+    for c, (_, A) in zip(problem.channels, aligned):
         clog = terms["thrust_N"] - plain["thrust_N"] if c == "thrust_N" else terms.get("clog", 0 * t)
         smooth = problem.band.smooth_model(np.vstack([clog, plain[c] * soft]))
-        cols.append(np.column_stack([problem.ones, problem.ramp, smooth[0], smooth[1]]))
+        cols.append(np.column_stack([A, problem.ramp, smooth[0], smooth[1]]))
     return cols
 
 
@@ -189,13 +200,15 @@ def seeds(problem: Problem, base_params: dict) -> dict:
         (_, value, coef), = _scan(problem, base_params, lambda: [(tau_s, shared)], tau_s=tau_s)
         by_tau.append((value, tau_s, coef))
     value, tau_s, coef = min(by_tau, key=lambda r: r[0])
-    n_shared = 2
-    thrust_coef = coef[n_shared:n_shared + 4]
-    softening = {"softening_fraction": float(np.clip(-thrust_coef[3], 0.02, 0.8)),
+    n_aligned = len(problem.linear_names(frozenset())[0])
+    thrust_coef = coef[2:2 + n_aligned + 3]  # after the two shared pulsation columns
+    scale = thrust_coef[0] if problem.calibrate else 1.0
+    clog_coef, soft_coef = thrust_coef[-2] / scale, thrust_coef[-1] / scale
+    softening = {"softening_fraction": float(np.clip(-soft_coef, 0.02, 0.8)),
                  "softening_log10_tau_s": float(math.log10(tau_s))}
     g = problem.geometry
     z_max = max(min(g.cortex_mm, 1e9) - g.cone_mm, 0.0) / g.diameter_mm
-    rise = max(thrust_coef[2], 0.02) * math.expm1(NOMINAL_GROWTH * z_max) if z_max > 0 else 0.0
+    rise = max(clog_coef, 0.02) * math.expm1(NOMINAL_GROWTH * z_max) if z_max > 0 else 0.0
     growth = float(np.clip(math.log1p(rise) / z_max if z_max > 0 else NOMINAL_GROWTH, 0.02, 4.0))
     return {"pulsations": pulsations, "softening": softening, "clogging": {"growth_exponent": growth}}
 
@@ -222,13 +235,26 @@ def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: d
     return starts
 
 
-def fit_all(problem: Problem, base_params: dict, seed: dict, subsets=None) -> dict:
-    """Fits of every subset of mechanisms (in order of size, each seeding the larger ones)."""
+def fit_all(problem: Problem, base_params: dict, seed: dict) -> dict:
+    """Fits of every subset of mechanisms (in order of size, each seeding the larger ones).
+
+    When even the fit with all mechanisms leaves clearly more than noise (χ²/dof above
+    ``PULSE_GATE``), every subset with feed pulsation is refitted with the pulse-shaped waveform
+    from its sine fit; the pulse shape replaces the sine where it lowers χ²·n_eff/n by more than
+    its parameter's BIC cost plus ``MIN_PULSE_GAIN``."""
     allowed = [m for m in MECHANISMS if m != "chip_clogging" or problem.clogging_possible]
-    if subsets is None:
-        subsets = [frozenset(m for k, m in enumerate(allowed) if mask >> k & 1)
-                   for mask in range(1 << len(allowed))]
+    subsets = [frozenset(m for k, m in enumerate(allowed) if mask >> k & 1) for mask in range(1 << len(allowed))]
     fits: dict = {}
     for subset in sorted(subsets, key=len):
         fits[subset] = fit_subset(problem, subset, starting_points(subset, base_params, seed, fits))
+    full = fits[max(fits, key=len)]
+    factor = problem.band.n_eff_factor
+    if full.chi2_total * factor / max(problem.y.size * factor - full.n_params, 1.0) > PULSE_GATE:
+        cost = math.log(problem.y.size * factor) + MIN_PULSE_GAIN
+        for subset in [s for s in fits if "feed_pulsation" in s]:
+            sine = fits[subset]
+            starts = [{**sine.params, "pulsation_sharpness": k} for k in (1.5, 4.0)]
+            pulse = fit_subset(problem, subset, starts, pulse=True)
+            if (sine.chi2_total - pulse.chi2_total) * factor > cost:
+                fits[subset] = pulse
     return fits

@@ -1,8 +1,8 @@
 """Where recording and simulation differ beyond the noise: intervals per channel.
 
 On the smoothed residual r_j (recording − aligned simulation) with standard error σ_j, the
-instants with |r_j/σ_j| above the family-wise threshold k = Φ⁻¹(1 − α/2n_eff), α = 0.01,
-are flagged (with n_eff a few hundred, k ≈ 4); flagged instants closer than ``MERGE_GAP``
+instants with |r_j/σ_j| above the family-wise threshold k = Φ⁻¹(1 − α/2n_eff), α = 0.001,
+are flagged (with n_eff a few hundred, k ≈ 4.5); flagged instants closer than ``MERGE_GAP``
 decimation steps form one interval. Its significance is −log10 p of the χ² test of all its
 instants, Σ z_j² on n_eff-scaled degrees of freedom (the residual there is not noise with
 probability 1 − p).
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-ALPHA = 0.01
+ALPHA = 0.001
 MERGE_GAP = 2
 
 

@@ -13,6 +13,8 @@ from femstudy.diagnosis.diagnose import Diagnosis
 from femstudy.recordings.figures import pyplot, save
 
 UNITS = {"thrust_N": ("thrust", "N"), "torque_Nmm": ("torque", "N·mm")}
+#: A calibration scale further than this from 1 is pointed out.
+SCALE_NOTE = 0.02
 
 
 def _wrap(text: str, indent: int) -> str:
@@ -32,6 +34,16 @@ def summary_text(d: Diagnosis, simulation_label: str) -> str:
     lines.append(f"alignment (not physics): shift {a['shift_s'] * 1e3:+.0f} ms, "
                  + ", ".join(f"{UNITS[c][0]} tare {a[f'{c}_tare']:+.3g} {UNITS[c][1]}" for c in problem.channels)
                  + (f", stop depth {a['stop_depth_mm']:.2f} mm" if "stop_depth_mm" in a else ""))
+    scales = d.to_json()["calibration"]
+    lines.append("calibration (not physics): " + ", ".join(
+        f"{UNITS[c][0]} x {scales[f'{c}_scale']:.4g}" for c in problem.channels)
+        + " on the simulated cutting loads")
+    for c in problem.channels:
+        g = scales[f"{c}_scale"]
+        if abs(g - 1) > SCALE_NOTE:
+            lines.append(f"  note: the simulated {UNITS[c][0]} is {100 * abs(1 / g - 1):.0f} % too "
+                         f"{'high' if g < 1 else 'low'}: a calibration difference (specific cutting energy, "
+                         f"drill), not missing physics")
     lines.append("")
     if d.mismatch:
         lines.append("mismatch (recording vs aligned simulation, beyond noise):")
@@ -62,20 +74,6 @@ def summary_text(d: Diagnosis, simulation_label: str) -> str:
     return "\n".join(lines)
 
 
-def predict(d: Diagnosis, fit) -> dict:
-    """Unsmoothed model of a fit on the model grid, per channel."""
-    problem = d.problem
-    t = problem.band.t_model
-    terms = problem.terms(fit.params)
-    out = {}
-    for c in problem.channels:
-        y = terms[c] + fit.params[f"{c}_tare"] + fit.params.get(f"{c}_drift_per_s", 0.0) * t
-        if c == "torque_Nmm" and "clog" in terms:
-            y = y + fit.params["torque_gain_Nmm_per_N"] * terms["clog"]
-        out[c] = y
-    return out
-
-
 def _shade(ax, d: Diagnosis, channel: str) -> None:
     for m in d.mismatch:
         if m["channel"] == channel:
@@ -95,7 +93,7 @@ def plot(path, d: Diagnosis, panels: str = "both") -> None:
     fig, axes = plt.subplots(len(rows), 1, figsize=(9, 1.9 * sum(heights) + 0.8), sharex=True,
                              constrained_layout=True, squeeze=False, gridspec_kw={"height_ratios": heights})
     t_model, t_dec = problem.band.t_model, problem.band.t_dec
-    base, improved = predict(d, d.baseline), predict(d, d.improved)
+    base, improved = problem.predict(d.baseline.params), problem.predict(d.improved.params)
     found = ", ".join(m["mechanism"].replace("_", " ") for m in d.mechanisms) or "nothing missing"
     raw = {"thrust_N": rec.thrust_N, "torque_Nmm": rec.torque_Nmm}
     for ax, (c, kind) in zip(axes[:, 0], rows):

@@ -27,10 +27,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from femstudy.diagnosis.fit import Fit, fit_subset
+from femstudy.diagnosis.fit import Fit, _solve, fit_subset
 from femstudy.diagnosis.mechanisms import Problem
 
 MIN_DELTA_BIC = 10.0
+#: A residual χ² test p-value at or below this is "not consistent with noise".
+RESIDUAL_P = 1e-3
 FOLDS = 5
 SEGMENT_S = 1.0
 #: Smallest sizes that count as missing physics: clogging rise by breakthrough and softening
@@ -106,13 +108,11 @@ def folds(problem: Problem) -> list[np.ndarray]:
 
 def held_out_chi2(problem: Problem, fit: Fit, inflation: np.ndarray) -> float:
     """Σ over folds of the χ² of held-out segments, each predicted by a fit on the others."""
-    from femstudy.diagnosis.fit import _solve  # the projection, evaluated on all rows
-
-    names = problem.nonlinear_names(fit.subset)
+    names = problem.nonlinear_names(fit.subset, fit.pulse)
     start = {n: fit.params[n] for n in names}
     total = 0.0
     for held in folds(problem):
-        f = fit_subset(problem, fit.subset, [start], rows=~held)
+        f = fit_subset(problem, fit.subset, [start], rows=~held, pulse=fit.pulse)
         nonlinear = {n: f.params[n] for n in names}
         res, linear, _ = _solve(problem, fit.subset, nonlinear, rows=~held)
         total += float(sum(np.sum(r[held] ** 2) / k for r, k in zip(res, inflation)))
