@@ -42,7 +42,8 @@ RECOVERED = [("growth_exponent", "chip_clogging", "growth_exponent_per_diameter"
              ("thrust_N_per_s", "sensor_drift", "thrust_N_per_s"),
              ("torque_Nmm_per_s", "sensor_drift", "torque_Nmm_per_s"),
              ("fraction", "thermal_softening", "fraction"),
-             ("time_constant_s", "thermal_softening", "time_constant_s")]
+             ("time_constant_s", "thermal_softening", "time_constant_s"),
+             ("loss_at_end_of_cut", "thermal_softening", "loss_at_end_of_cut")]
 
 
 def run_case(kind: str, seed: int, torque: bool, model: bool, duration_s: float | None = None):

@@ -142,7 +142,9 @@ def make_case(kind: str, seed: int, torque: bool = True, duration_s: float | Non
     if "chip_clogging" in CLASSES[kind]:
         true.update(growth_exponent=m["true_growth_exponent"], mu_f=m["true_mu_f"], mu_w=m["true_mu_w"])
     if effects.softening:
-        true.update(fraction=effects.softening.fraction, time_constant_s=effects.softening.time_constant_s)
+        sf, tau = effects.softening.fraction, effects.softening.time_constant_s
+        in_contact = m["true_retraction_s"] - m["true_contact_s"]
+        true.update(fraction=sf, time_constant_s=tau, loss_at_end_of_cut=sf * -math.expm1(-in_contact / tau))
     if effects.drift:
         true.update(thrust_N_per_s=effects.drift.thrust_N_per_s, torque_Nmm_per_s=effects.drift.torque_Nmm_per_s)
     rec = replace(rec, source=f"<{kind} case {seed}>")

@@ -43,6 +43,9 @@ STOP_SCAN_S = 0.3
 HUBER_Z = 3.0
 #: Fewest unloaded instants from which a tare is taken.
 MIN_UNLOADED = 5
+#: Smallest noise level, as a fraction of a channel's recorded range: a sensor resolves no
+#: better, and below it the model's own quadrature error (about 1e-4 of the load) would count.
+NOISE_FLOOR = 1e-3
 
 
 @dataclass
@@ -89,10 +92,6 @@ class Diagnosis:
         }
 
 
-def geometry_of(recording: Recording, cortex_mm: float) -> Geometry:
-    return Geometry(recording.feed_mm_s, recording.spindle_rpm, recording.drill, cortex_mm)
-
-
 def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[Problem, list]:
     """Smooth the recording in the window the simulation covers; estimate its noise."""
     notes = []
@@ -117,11 +116,11 @@ def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[P
     raw = {"thrust_N": recording.thrust_N, "torque_Nmm": recording.torque_Nmm}
     sims = {"thrust_N": F_sim, "torque_Nmm": T_sim}
     sigma_raw = np.array([white_noise_sigma(t[inside], raw[c][inside] - sims[c]) for c in channels])
-    floor = 1e-6 * np.array([max(float(np.ptp(raw[c][inside])), 1e-9) for c in channels])
+    floor = NOISE_FLOOR * np.array([max(float(np.ptp(raw[c][inside])), 1e-9) for c in channels])
     sigma_raw = np.maximum(sigma_raw, floor)
     y = band.smooth(np.vstack([raw[c] for c in channels]))
     sigma = sigma_raw[:, None] * band.noise_gain[None, :]
-    geometry = geometry_of(recording, cortex_mm)
+    geometry = Geometry(recording.feed_mm_s, recording.spindle_rpm, recording.drill, cortex_mm)
     F_o = float(simulation.loads(np.array([simulation.contact_s + geometry.cone_mm / geometry.feed_mm_s]))[0][0])
     clogging_possible = cortex_mm > geometry.cone_mm + 0.05 * geometry.diameter_mm and F_o > 0
     if not clogging_possible:

@@ -99,7 +99,7 @@ def pulsation(problem: Problem, fit: Fit) -> tuple[dict, str]:
     params = {"amplitude": _r(A), "frequency_hz": _r(f_p), "phase_rad": _r(phase), "period_s": _r(1 / f_p),
               "waveform": "pulse" if fit.pulse else "sine", "depth_amplitude_mm": _r(depth),
               "thrust_amplitude_N": _r(A * problem.initial_force_N * p.get("thrust_N_scale", 1.0))}
-    sign = "+" if phase >= 0 else "−"
+    sign = "−" if phase < -0.005 else "+"
     if fit.pulse:
         params["sharpness"] = _r(kappa)
         law = (f"f(t) = f·(1 + {A:.3g}·tanh({kappa:.2g}·sin(2π·{f_p:.3g}·t {sign} {abs(phase):.2f}))"

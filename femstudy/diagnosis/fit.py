@@ -2,14 +2,14 @@
 
 For a subset of mechanisms the nonlinear parameters θ (alignment, growth exponent, pulsation,
 softening) are fitted with :func:`scipy.optimize.least_squares` (bounded, trust-region
-reflective); for each θ the linear ones (tare, drift rates, torque gain) are the weighted
-linear least-squares solution (variable projection). Residuals are weighted by the noise of
-each smoothed sample, so the cost is χ²/2.
+reflective); for each θ the linear ones (tares, drift rates, clogging torque gain, calibration
+scales) are the weighted linear least-squares solution (variable projection, :func:`project`).
+Residuals are weighted by the noise of each smoothed sample, so the cost is χ²/2.
 
 Starting points: the pulsation frequency is multimodal, so a scan over frequencies (0.15–3.5
 Hz) fits the exact linearisation of the pulsation term in (a, b) — load modulation plus depth
 lead — together with linear stand-ins for the other mechanisms, one small linear solve per
-frequency; its best local maxima start separate fits. Softening's time constant is seeded by a
+frequency; its best local minima of χ² start separate fits. Softening's time constant is seeded by a
 scan of the same kind. Each subset is also started from the best fit of its subsets with one
 mechanism fewer; the best optimum is kept. The pulse-shaped pulsation is fitted only where the
 sine leaves more than noise (:func:`fit_all`).
@@ -37,7 +37,7 @@ MIN_PULSE_GAIN = 10.0
 
 @dataclass
 class Fit:
-    """One subset's optimum: parameters, χ² per channel, smoothed model and residual."""
+    """One subset's optimum: parameters, χ² per channel and the smoothed model."""
 
     subset: frozenset
     params: dict                 # nonlinear and linear parameters by name
@@ -64,8 +64,9 @@ def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.lstsq(A, b, rcond=None)[0]
 
 
-def _solve(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray | None = None):
-    """Weighted residual vector, linear parameters and smoothed model for nonlinear ``params``."""
+def project(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray | None = None):
+    """Weighted residuals (per channel, all instants), linear parameters fitted on ``rows``
+    (default all) and the smoothed model, for the nonlinear ``params``."""
     parts = problem.design(subset, params)
     names = problem.linear_names(subset)
     residuals, linear, model = [], {}, []
@@ -95,7 +96,7 @@ def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np
         x0 = np.clip([start[n] for n in names], lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
         def fun(x):
-            res, _, _ = _solve(problem, subset, dict(zip(names, x)), rows)
+            res, _, _ = project(problem, subset, dict(zip(names, x)), rows)
             return np.concatenate([r if rows is None else r[rows] for r in res])
 
         sol = optimize.least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac",
@@ -103,7 +104,7 @@ def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np
         if best is None or sol.cost < best.cost:
             best = sol
     params = dict(zip(names, best.x))
-    res, linear, model = _solve(problem, subset, params, rows)
+    res, linear, model = project(problem, subset, params, rows)
     chi2 = np.array([float(np.sum((r if rows is None else r[rows]) ** 2)) for r in res])
     n_linear = sum(len(n) for n in problem.linear_names(subset))
     return Fit(subset, {**params, **linear}, chi2, model, len(names) + n_linear, pulse)
@@ -152,14 +153,12 @@ def _stand_in_columns(problem: Problem, base_params: dict, tau_s: float) -> list
 
 
 def _scan(problem: Problem, base_params: dict, shared_of, tau_s: float):
-    """χ² of a joint linear fit (shared columns + per-channel stand-ins) for one candidate."""
+    """For each (key, shared columns) of ``shared_of()``: the χ² and coefficients of a joint
+    linear fit of both channels on the shared columns plus each channel's stand-ins."""
     stand_in = _stand_in_columns(problem, base_params, tau_s)
     base = problem.design(frozenset(), base_params)
-    blocks, targets = [], []
     n_channels = len(problem.channels)
-    for c in range(n_channels):
-        w = 1.0 / problem.sigma[c]
-        targets.append((problem.y[c] - base[c][0]) * w)
+    targets = [(problem.y[c] - base[c][0]) / problem.sigma[c] for c in range(n_channels)]
     results = []
     for key, shared in shared_of():
         blocks = []
@@ -199,7 +198,7 @@ def seeds(problem: Problem, base_params: dict) -> dict:
     for tau_s in TAU_GRID_S:
         (_, value, coef), = _scan(problem, base_params, lambda: [(tau_s, shared)], tau_s=tau_s)
         by_tau.append((value, tau_s, coef))
-    value, tau_s, coef = min(by_tau, key=lambda r: r[0])
+    _, tau_s, coef = min(by_tau, key=lambda r: r[0])
     n_aligned = len(problem.linear_names(frozenset())[0])
     thrust_coef = coef[2:2 + n_aligned + 3]  # after the two shared pulsation columns
     scale = thrust_coef[0] if problem.calibrate else 1.0
@@ -207,7 +206,7 @@ def seeds(problem: Problem, base_params: dict) -> dict:
     softening = {"softening_fraction": float(np.clip(-soft_coef, 0.02, 0.8)),
                  "softening_log10_tau_s": float(math.log10(tau_s))}
     g = problem.geometry
-    z_max = max(min(g.cortex_mm, 1e9) - g.cone_mm, 0.0) / g.diameter_mm
+    z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
     rise = max(clog_coef, 0.02) * math.expm1(NOMINAL_GROWTH * z_max) if z_max > 0 else 0.0
     growth = float(np.clip(math.log1p(rise) / z_max if z_max > 0 else NOMINAL_GROWTH, 0.02, 4.0))
     return {"pulsations": pulsations, "softening": softening, "clogging": {"growth_exponent": growth}}

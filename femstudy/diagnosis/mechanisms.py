@@ -27,7 +27,7 @@ thrust and torque are
 - ``thermal_softening``: H = 1 − s (1 − exp(−(t − t_c)/τ_s)) after contact t_c.
 
 Every term is evaluated on the band's model grid and smoothed like the recording. The linear
-parameters (tare, drift rates, k_T) are solved for inside the fit (variable projection).
+parameters (tares, drift rates, k_T, scales) are solved for inside the fit (variable projection).
 """
 
 from __future__ import annotations

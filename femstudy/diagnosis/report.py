@@ -35,9 +35,9 @@ def summary_text(d: Diagnosis, simulation_label: str) -> str:
                  + ", ".join(f"{UNITS[c][0]} tare {a[f'{c}_tare']:+.3g} {UNITS[c][1]}" for c in problem.channels)
                  + (f", stop depth {a['stop_depth_mm']:.2f} mm" if "stop_depth_mm" in a else ""))
     scales = d.to_json()["calibration"]
-    lines.append("calibration (not physics): " + ", ".join(
-        f"{UNITS[c][0]} x {scales[f'{c}_scale']:.4g}" for c in problem.channels)
-        + " on the simulated cutting loads")
+    if problem.calibrate:
+        lines.append("calibration (not physics): the simulated cutting loads rescaled, " + ", ".join(
+            f"{UNITS[c][0]} x {scales[f'{c}_scale']:.4g}" for c in problem.channels))
     for c in problem.channels:
         g = scales[f"{c}_scale"]
         if abs(g - 1) > SCALE_NOTE:
@@ -80,15 +80,15 @@ def _shade(ax, d: Diagnosis, channel: str) -> None:
             ax.axvspan(m["start_s"], m["end_s"], color="tab:orange", alpha=0.12, lw=0)
 
 
-def plot(path, d: Diagnosis, panels: str = "both") -> None:
+def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | None = None) -> None:
     """Overlay (recording, simulation, simulation + missing physics) and/or the smoothed
-    residual before and, on its own scale, after adding the missing physics, per channel;
-    mismatch intervals shaded."""
+    residual before and, on its own scale, after adding the missing physics, per channel
+    (default all); mismatch intervals shaded."""
     plt = pyplot()
     problem, rec = d.problem, d.recording
     residuals = ("before", "after") if d.selection.subset else ("before",)
     kinds = {"both": ("overlay",) + residuals, "overlay": ("overlay",), "residual": residuals}[panels]
-    rows = [(c, k) for c in problem.channels for k in kinds]
+    rows = [(c, k) for c in (channels or problem.channels) for k in kinds]
     heights = [1.5 if k == "overlay" else 1.0 for _, k in rows]
     fig, axes = plt.subplots(len(rows), 1, figsize=(9, 1.9 * sum(heights) + 0.8), sharex=True,
                              constrained_layout=True, squeeze=False, gridspec_kw={"height_ratios": heights})

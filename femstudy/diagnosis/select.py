@@ -10,7 +10,7 @@
 2. Starting from the best subset, a mechanism is dropped while any one fails:
    - drop-one ΔBIC = BIC(s − m) − BIC(s) ≥ ``MIN_DELTA_BIC`` ("very strong" evidence on the
      Kass–Raftery scale);
-   - a physically meaningful size (``materiality``);
+   - a physically meaningful size (``THRESHOLDS``, below);
    - held-out prediction: in a K-fold split into interleaved segments of ``SEGMENT_S``, the
      subset with the mechanism predicts the held-out segments better than without it.
 3. Confidence of each mechanism: its posterior inclusion probability from the BIC weights
@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from femstudy.diagnosis.fit import Fit, _solve, fit_subset
+from femstudy.diagnosis.fit import Fit, fit_subset, project
 from femstudy.diagnosis.mechanisms import Problem
 
 MIN_DELTA_BIC = 10.0
@@ -48,6 +48,8 @@ MIN_SOFTENING_LOSS = 0.03
 
 @dataclass
 class Selection:
+    """The selected subset and the evidence for it."""
+
     subset: frozenset
     bic: dict                    # subset -> BIC
     confidence: dict             # mechanism -> posterior inclusion probability
@@ -59,6 +61,7 @@ class Selection:
 
 
 def bic_table(problem: Problem, fits: dict) -> tuple[dict, np.ndarray]:
+    """BIC of every subset and the per-channel misfit inflation κ² (item 1 of the module)."""
     full = max(fits, key=len)
     n = problem.y.size
     n_eff = n * problem.band.n_eff_factor
@@ -114,12 +117,13 @@ def held_out_chi2(problem: Problem, fit: Fit, inflation: np.ndarray) -> float:
     for held in folds(problem):
         f = fit_subset(problem, fit.subset, [start], rows=~held, pulse=fit.pulse)
         nonlinear = {n: f.params[n] for n in names}
-        res, linear, _ = _solve(problem, fit.subset, nonlinear, rows=~held)
+        res, _, _ = project(problem, fit.subset, nonlinear, rows=~held)
         total += float(sum(np.sum(r[held] ** 2) / k for r, k in zip(res, inflation)))
     return total
 
 
 def select(problem: Problem, fits: dict) -> Selection:
+    """The selected subset, with the evidence (see the module docstring)."""
     bic, inflation = bic_table(problem, fits)
     best = min(bic, key=bic.get)
     weights = {s: math.exp(-(b - bic[best]) / 2) for s, b in bic.items()}
