@@ -127,3 +127,31 @@ def test_load_model_path_finds_softening_and_is_silent_when_complete(tmp_path):
         assert "load model 'clogging'" in proc.stdout
     p = js["missing_physics"][0]["parameters"]
     assert p["fraction"] == pytest.approx(0.2, rel=0.1) and p["time_constant_s"] == pytest.approx(1.5, rel=0.25)
+
+
+def test_simulation_without_a_header_takes_feed_and_speed_from_the_recording(files, tmp_path):
+    """An FE trace as plain columns (no '#' metadata lines)."""
+    lines = (files / "allotta.csv").read_text().splitlines()
+    (tmp_path / "bare.csv").write_text("\n".join(line for line in lines if not line.startswith("#")) + "\n")
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(tmp_path / "bare.csv"),
+                   "--json", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(m["mechanism"] for m in json.loads(out.read_text())["missing_physics"]) == \
+        ["chip_clogging", "feed_pulsation"]
+
+
+def test_simulation_on_its_own_clock_is_placed_at_the_detected_contact(files, tmp_path):
+    """An FE history starts at contact (t = 0); the recording's contact is 2 s in."""
+    from femstudy.recordings import read_recording
+
+    sim = read_recording(files / "allotta.csv")
+    write_recording(tmp_path / "from_contact.csv", replace(sim, time_s=sim.time_s - 2.0))
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(tmp_path / "from_contact.csv"),
+                   "--json", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    js = json.loads(out.read_text())
+    assert sorted(m["mechanism"] for m in js["missing_physics"]) == ["chip_clogging", "feed_pulsation"]
+    (note,) = [n for n in js["notes"] if "runs on another clock" in n]
+    assert float(note.split("shifted by ")[1].split(" s ")[0]) == pytest.approx(2.0, abs=0.1)

@@ -11,8 +11,8 @@ feed stops at ``stop_s``; then the loads vanish. The diagnosis maps the recordin
   because then zero is what it means (the drill is off the bone); otherwise the diagnosis is
   restricted to the span it covers. Its contact is where its first loaded samples extrapolate
   to zero (the entry ramp is linear in depth), its stop the deepest point of its ``depth_mm``
-  column, or else one spindle revolution before its loads vanish for good (the generator's and the rig's convention: loads fall to zero within one
-  revolution once the feed stops).
+  column, or else one spindle revolution before its loads vanish for good (the generator's
+  and the rig's convention: loads fall to zero within one revolution once the feed stops).
 - :class:`ModelSimulation`: a load model of :mod:`femstudy.drilling.history` for the
   recording's feed, speed, drill and cortex, started at the recording's contact and stopped at
   a depth that the fit adjusts (the stop of a real rig is not at a known depth).
@@ -60,6 +60,7 @@ class TraceSimulation:
     spindle_rpm: float
     depth_mm: np.ndarray | None = None
     label: str = "simulation"
+    note: str = ""               # how the trace was placed on the recording's clock, if it was
 
     def __post_init__(self) -> None:
         t, F = self.time_s, np.abs(self.thrust_N)

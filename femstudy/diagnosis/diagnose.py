@@ -94,7 +94,7 @@ class Diagnosis:
 
 def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[Problem, list]:
     """Smooth the recording in the window the simulation covers; estimate its noise."""
-    notes = []
+    notes = [simulation.note] if getattr(simulation, "note", "") else []
     t = recording.time_s
     lo, hi = simulation.span()
     start, end = max(t[0], lo), min(t[-1], hi)

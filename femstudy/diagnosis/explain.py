@@ -44,13 +44,15 @@ def _r(x, digits=4):
 
 
 def clogging(problem: Problem, fit: Fit, bone_mu_w: float | None) -> tuple[dict, str]:
+    """Growth, rise, torque gain and the friction they imply (see the module docstring)."""
     p, g, sim = fit.params, problem.geometry, problem.simulation
     drill = g.drill
     z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
     growth = p["growth_exponent"]
     F_o = problem.initial_force_N * p.get("thrust_N_scale", 1.0)  # the recording's initial force
     excess = F_o * math.expm1(growth * z_max)
-    at_breakthrough = float(sim.loads(np.array([sim.contact_s + g.cortex_mm / g.feed_mm_s]))[0][0]) * F_o / problem.initial_force_N
+    simulated = float(sim.loads(np.array([sim.contact_s + g.cortex_mm / g.feed_mm_s]))[0][0])
+    at_breakthrough = simulated * F_o / problem.initial_force_N
     own_growth = math.log(max(at_breakthrough, 1e-12) / F_o) / z_max if z_max > 0 else 0.0
     total = math.log(max(at_breakthrough + excess, 1e-12) / F_o) / z_max if z_max > 0 else growth
     M = total * drill.flute_area_mm2 / (drill.eta * drill.diameter_mm)
@@ -88,6 +90,7 @@ def clogging(problem: Problem, fit: Fit, bone_mu_w: float | None) -> tuple[dict,
 
 
 def pulsation(problem: Problem, fit: Fit) -> tuple[dict, str]:
+    """Amplitude, frequency, phase, waveform and the depth lead of the feed pulsation."""
     p, g = fit.params, problem.geometry
     A = math.hypot(p["pulsation_a"], p["pulsation_b"])
     f_p = p["pulsation_frequency_hz"]
@@ -114,6 +117,7 @@ def pulsation(problem: Problem, fit: Fit) -> tuple[dict, str]:
 
 
 def drift(problem: Problem, fit: Fit) -> tuple[dict, str]:
+    """Drift rates and the change over the compared span, per channel."""
     p = fit.params
     span = float(problem.band.t_dec[-1] - problem.band.t_dec[0])
     rate_F = p["thrust_N_drift_per_s"]
@@ -131,6 +135,7 @@ def drift(problem: Problem, fit: Fit) -> tuple[dict, str]:
 
 
 def softening(problem: Problem, fit: Fit) -> tuple[dict, str]:
+    """Fraction, time constant and the loss reached by the end of the cut."""
     p = fit.params
     s, tau = p["softening_fraction"], 10 ** p["softening_log10_tau_s"]
     sim = problem.simulation

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy import ndimage
 
@@ -11,6 +13,8 @@ from femstudy.errors import UserError, require
 from femstudy.recordings.reader import Recording, read_recording
 
 DIAGNOSED_MODELS = ("allotta", "clogging")
+#: A simulated trace whose rise is further than this from the recording's is on another clock [s].
+CLOCK_TOLERANCE_S = 0.4
 
 
 def cut_phase(rec: Recording):
@@ -48,7 +52,33 @@ def read_simulation(path, rec: Recording) -> TraceSimulation:
             if note.startswith(f"{key} = ") and "overrides" in note:
                 raise UserError(f"simulation {sim.name} was computed for {key} = {sim_header_value(note)} but the "
                                 f"recording {rec.name} has {key} = {value:g}")
-    return TraceSimulation.from_recording(sim, rec.spindle_rpm)
+    return on_recording_clock(TraceSimulation.from_recording(sim, rec.spindle_rpm), rec)
+
+
+def _rise_time_s(t: np.ndarray, F: np.ndarray, window: int) -> float:
+    """First time the thrust, averaged over ``window`` samples and measured from its level at
+    the start, exceeds a tenth of its peak."""
+    smooth = ndimage.uniform_filter1d(F, max(window, 1))
+    rise = smooth - np.median(smooth[: max(smooth.size // 20, 1)])
+    return float(t[int(np.argmax(rise > 0.1 * rise.max()))])
+
+
+def on_recording_clock(sim: TraceSimulation, rec: Recording) -> TraceSimulation:
+    """The trace itself when its clock is the recording's, else moved onto it.
+
+    A trace whose rise (10 % of peak) is more than ``CLOCK_TOLERANCE_S`` from the recording's
+    runs on another clock (an FE history usually starts at contact): it is shifted to put its
+    contact at the contact that :func:`cut_phase` detects, and a note says so. Smaller offsets
+    are left to the alignment."""
+    window = int(round(0.05 * rec.sample_rate_hz))
+    offset = _rise_time_s(rec.time_s, rec.thrust_N, window) - _rise_time_s(sim.time_s, sim.thrust_N, 1)
+    if abs(offset) <= CLOCK_TOLERANCE_S:
+        return sim
+    shift = cut_phase(rec).contact_s - sim.contact_s
+    moved = replace(sim, time_s=sim.time_s + shift)
+    moved.note = (f"{sim.label} runs on another clock: shifted by {shift:+.3f} s to put its contact at the "
+                  f"recording's detected contact")
+    return moved
 
 
 def sim_header_value(note: str) -> str:

@@ -22,6 +22,8 @@ def _wrap(text: str, indent: int) -> str:
 
 
 def summary_text(d: Diagnosis, simulation_label: str) -> str:
+    """The printed summary: inputs, noise, alignment, mismatch, mechanisms, fit, residual check.
+    "Compared below" is the frequency where the smoothing's gain is exp(−1/2)."""
     rec, problem = d.recording, d.problem
     lines = [f"recording {rec.name}: {rec.duration_s:.2f} s at {rec.sample_rate_hz:.0f} Hz, "
              f"f = {rec.feed_mm_s:g} mm/s, N = {rec.spindle_rpm:g} rpm, cortex {problem.geometry.cortex_mm:.2f} mm; "
@@ -123,10 +125,12 @@ def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | N
 
 
 def write_json(path, d: Diagnosis) -> None:
+    """The JSON contract (:meth:`Diagnosis.to_json`), written atomically."""
     atomic.write_text(path, json.dumps(d.to_json(), indent=2) + "\n")
 
 
 def markdown(d: Diagnosis, summary: str) -> str:
+    """report.md: the summary, both figures, each mechanism's parameters and the best subsets."""
     js = d.to_json()
     lines = [f"# Diagnosis of {d.recording.name}", "", "```", summary, "```", "",
              "![overlay](overlay.png)", "", "![residuals](residuals.png)", "",
