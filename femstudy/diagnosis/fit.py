@@ -87,27 +87,29 @@ def project(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray 
 
 
 def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np.ndarray | None = None,
-               pulse: bool = False) -> Fit:
-    """The best of several bounded least-squares fits of one subset."""
-    names = problem.nonlinear_names(subset, pulse)
+               pulse: bool = False, fixed: dict | None = None) -> Fit:
+    """The best of several bounded least-squares fits of one subset, on ``rows`` (default all),
+    with the nonlinear parameters in ``fixed`` held at their values."""
+    fixed = fixed or {}
+    names = [n for n in problem.nonlinear_names(subset, pulse) if n not in fixed]
     lo, hi = problem.bounds(names)
     best = None
     for start in starts:
         x0 = np.clip([start[n] for n in names], lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
         def fun(x):
-            res, _, _ = project(problem, subset, dict(zip(names, x)), rows)
+            res, _, _ = project(problem, subset, {**fixed, **dict(zip(names, x))}, rows)
             return np.concatenate([r if rows is None else r[rows] for r in res])
 
         sol = optimize.least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac",
                                      ftol=1e-6, xtol=1e-6, max_nfev=30 * (len(names) + 1))
         if best is None or sol.cost < best.cost:
             best = sol
-    params = dict(zip(names, best.x))
+    params = {**fixed, **dict(zip(names, best.x))}
     res, linear, model = project(problem, subset, params, rows)
     chi2 = np.array([float(np.sum((r if rows is None else r[rows]) ** 2)) for r in res])
     n_linear = sum(len(n) for n in problem.linear_names(subset))
-    return Fit(subset, {**params, **linear}, chi2, model, len(names) + n_linear, pulse)
+    return Fit(subset, {**params, **linear}, chi2, model, len(names) + len(fixed) + n_linear, pulse)
 
 
 def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list[np.ndarray]:

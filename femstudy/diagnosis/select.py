@@ -110,12 +110,15 @@ def folds(problem: Problem) -> list[np.ndarray]:
 
 
 def held_out_chi2(problem: Problem, fit: Fit, inflation: np.ndarray) -> float:
-    """Σ over folds of the χ² of held-out segments, each predicted by a fit on the others."""
+    """Σ over folds of the χ² of held-out segments, each predicted by a fit on the others. The
+    alignment (shift, stop depth) stays at the full fit's values: it is pinned by a few instants
+    (the ramp, the stop) that a fold may hold out, and it is not what is being tested."""
     names = problem.nonlinear_names(fit.subset, fit.pulse)
     start = {n: fit.params[n] for n in names}
+    alignment = {n: fit.params[n] for n in problem.nonlinear_names(frozenset())}
     total = 0.0
     for held in folds(problem):
-        f = fit_subset(problem, fit.subset, [start], rows=~held, pulse=fit.pulse)
+        f = fit_subset(problem, fit.subset, [start], rows=~held, pulse=fit.pulse, fixed=alignment)
         nonlinear = {n: f.params[n] for n in names}
         res, _, _ = project(problem, fit.subset, nonlinear, rows=~held)
         total += float(sum(np.sum(r[held] ** 2) / k for r, k in zip(res, inflation)))
