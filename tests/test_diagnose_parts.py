@@ -83,6 +83,16 @@ def test_trace_that_ends_loaded_limits_the_comparison_to_its_span():
     assert problem.band.t_dec[-1] <= 5.0 and "compared over" in notes[0]
 
 
+def test_a_simulation_outside_the_recording_is_refused():
+    from femstudy.errors import UserError
+
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), None, None, None, None))
+    sim = synthesize(1.5, 1500, effects=Effects.none())
+    late = TraceSimulation(sim.time_s + 100.0, sim.thrust_N, sim.torque_Nmm, 1500)
+    with pytest.raises(UserError, match="does not overlap recording"):
+        build_problem(rec, late, 6.0)
+
+
 def test_alignment_finds_a_clock_offset_and_tare_despite_missing_clogging():
     """Clogging adds up to 130 % after full engagement; the robust alignment still reads the
     offset from the entry ramp and the tare from the unloaded stretches."""
