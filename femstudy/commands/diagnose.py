@@ -1,0 +1,92 @@
+"""``femstudy diagnose``: what physics a simulation leaves out of a recording."""
+
+from __future__ import annotations
+
+import argparse
+import tomllib
+from pathlib import Path
+
+from femstudy.errors import require
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("diagnose", help="locate and explain where a recording departs from a simulation",
+                       description="Compare a force/torque recording with a simulation: locate where they "
+                                   "differ beyond the measurement noise, find which missing mechanisms "
+                                   "(chip clogging, feed pulsation, sensor drift, thermal softening) explain "
+                                   "it, fit them and show the fit improve. Reports nothing when nothing is "
+                                   "missing. Exit status 0 whatever is found.")
+    p.add_argument("recording", type=Path, metavar="RECORDING.csv", help="the recording (femstudy format)")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--simulation", type=Path, metavar="SIM.csv",
+                      help="a simulated trace in the recording format, on the recording's clock "
+                           "(any sampling rate and span)")
+    what.add_argument("--model", choices=("allotta", "clogging"),
+                      help="a femstudy load model for the recording's feed, speed and drill, started "
+                           "at its detected contact")
+    p.add_argument("--bone", default="bovine",
+                   help="bone set for --model and for the friction reading of chip clogging (bovine)")
+    p.add_argument("--cortex-mm", type=float,
+                   help="cortical thickness [mm] (default: header cortex_mm, else from the breakthrough)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="recording metadata, e.g. --set spindle_rpm=1500 (TOML value)")
+    p.add_argument("--override", action="store_true",
+                   help="let --set values win over the recording's header when they disagree")
+    p.add_argument("--json", type=Path, metavar="OUT.json", help="write the diagnosis as JSON")
+    p.add_argument("--report", type=Path, metavar="DIR",
+                   help="write report.md, overlay.png, residuals.png and diagnosis.json to DIR")
+    p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the overlay and residual figure")
+    p.add_argument("--quiet", action="store_true", help="no progress messages")
+    p.set_defaults(run=run)
+
+
+def parse_settings(items: list[str]) -> dict:
+    """``KEY=VALUE`` pairs with TOML values (bare words are taken as text)."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        require(bool(sep and key.strip()), f"--set expects KEY=VALUE, got '{item}'")
+        try:
+            out[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            out[key.strip()] = value.strip()
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from femstudy.console import Console
+    from femstudy.diagnosis import inputs, report
+    from femstudy.diagnosis.diagnose import diagnose
+    from femstudy.drilling.friction import load_bone_set
+    from femstudy.recordings import read_recording
+
+    console = Console(args.quiet)
+    require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
+            f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
+    require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
+    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override)
+    for note in rec.notes:
+        console.progress(note)
+    bone = load_bone_set(args.bone)
+    if args.simulation:
+        sim = inputs.read_simulation(args.simulation, rec)
+        cortex = inputs.cortex_thickness(rec, args.cortex_mm)
+        label = f"{args.simulation.name}"
+    else:
+        sim, cortex = inputs.model_simulation(rec, args.model, bone, args.cortex_mm)
+        label = f"load model '{args.model}' (bone set '{bone.name}'), contact at {sim.contact_s:.3f} s"
+    console.progress(f"read {rec.name} ({rec.time_s.size} samples) and the simulation ({label})")
+    d = diagnose(rec, sim, cortex, bone, progress=console.progress)
+    summary = report.summary_text(d, label)
+    print(summary)
+    if args.json:
+        report.write_json(args.json, d)
+        print(f"wrote {args.json}")
+    if args.plot:
+        report.plot(args.plot, d)
+        print(f"wrote {args.plot}")
+    if args.report:
+        report.write_report(args.report, d, summary)
+        print(f"wrote {args.report}/report.md")
+    console.progress(f"diagnosed in {d.seconds:.2f} s")
+    return 0

@@ -1,0 +1,160 @@
+"""What ``femstudy diagnose`` prints and writes: summary text, figures, markdown report."""
+
+from __future__ import annotations
+
+import json
+import math
+import textwrap
+
+import numpy as np
+
+from femstudy import atomic
+from femstudy.diagnosis.diagnose import Diagnosis
+from femstudy.recordings.figures import pyplot, save
+
+UNITS = {"thrust_N": ("thrust", "N"), "torque_Nmm": ("torque", "N·mm")}
+#: A calibration scale further than this from 1 is pointed out.
+SCALE_NOTE = 0.02
+
+
+def _wrap(text: str, indent: int) -> str:
+    return textwrap.fill(text, width=100, initial_indent=" " * indent, subsequent_indent=" " * indent)
+
+
+def summary_text(d: Diagnosis, simulation_label: str) -> str:
+    """The printed summary: inputs, noise, alignment, mismatch, mechanisms, fit, residual check.
+    "Compared below" is the frequency where the smoothing's gain is exp(−1/2)."""
+    rec, problem = d.recording, d.problem
+    lines = [f"recording {rec.name}: {rec.duration_s:.2f} s at {rec.sample_rate_hz:.0f} Hz, "
+             f"f = {rec.feed_mm_s:g} mm/s, N = {rec.spindle_rpm:g} rpm, cortex {problem.geometry.cortex_mm:.2f} mm; "
+             f"simulation: {simulation_label}"]
+    lines += [f"  note: {n}" for n in d.notes]
+    noise = ", ".join(f"{UNITS[c][0]} {s:.3g} {UNITS[c][1]}" for c, s in zip(problem.channels, problem.sigma_raw))
+    lines.append(f"noise (white, from the spectrum above 10 Hz): {noise}; compared below "
+                 f"{1 / (2 * math.pi * problem.band.sigma_s):.1f} Hz at {problem.band.t_dec.size} instants")
+    a = d.to_json()["alignment"]
+    lines.append(f"alignment (not physics): shift {a['shift_s'] * 1e3:+.0f} ms, "
+                 + ", ".join(f"{UNITS[c][0]} tare {a[f'{c}_tare']:+.3g} {UNITS[c][1]}" for c in problem.channels)
+                 + (f", stop depth {a['stop_depth_mm']:.2f} mm" if "stop_depth_mm" in a else ""))
+    scales = d.to_json()["calibration"]
+    if problem.calibrate:
+        lines.append("calibration (not physics): the simulated cutting loads rescaled, " + ", ".join(
+            f"{UNITS[c][0]} x {scales[f'{c}_scale']:.4g}" for c in problem.channels))
+    for c in problem.channels:
+        g = scales[f"{c}_scale"]
+        if abs(g - 1) > SCALE_NOTE:
+            lines.append(f"  note: the simulated {UNITS[c][0]} is {100 * abs(1 / g - 1):.0f} % too "
+                         f"{'high' if g < 1 else 'low'}: a calibration difference (specific cutting energy, "
+                         f"drill), not missing physics")
+    lines.append("")
+    if d.mismatch:
+        lines.append("mismatch (recording vs aligned simulation, beyond noise):")
+        for m in d.mismatch:
+            lines.append(f"  {m['channel']:11s} {m['start_s']:7.2f} - {m['end_s']:7.2f} s   "
+                         f"-log10 p = {m['significance']:.4g}   max |z| = {m['max_abs_z']:.3g}")
+    else:
+        lines.append("mismatch: none beyond noise")
+    lines.append("")
+    if d.mechanisms:
+        lines.append("missing physics:")
+        for m in d.mechanisms:
+            lines.append(f"  {m['mechanism']} (confidence {m['confidence']:.3f}, drop-one dBIC "
+                         f"{m['evidence']['delta_bic']:.4g})")
+            lines.append(_wrap(m["explanation"], 4))
+    else:
+        lines.append("missing physics: none - the simulation explains the recording within the noise")
+    lines.append("")
+    for c, s in d.fit_summary.items():
+        name, unit = UNITS[c]
+        b, i = s["baseline"], s["improved"]
+        lines.append(f"fit, {name} over the cut {s['window_s'][0]:.2f}-{s['window_s'][1]:.2f} s: "
+                     f"R2 {b['r2']:.4f} -> {i['r2']:.4f}, RMSE {b['rmse']:.4g} -> {i['rmse']:.4g} {unit}")
+    check = d.to_json()["residual_check"]
+    verdict = ("consistent with noise" if check["consistent_with_noise"]
+               else "NOT consistent with noise: part of the mismatch is not explained by the four mechanisms")
+    lines.append(f"residual after the fit: chi2/dof = {check['chi2_per_dof']:.3g} ({verdict})")
+    return "\n".join(lines)
+
+
+def _shade(ax, d: Diagnosis, channel: str) -> None:
+    for m in d.mismatch:
+        if m["channel"] == channel:
+            ax.axvspan(m["start_s"], m["end_s"], color="tab:orange", alpha=0.12, lw=0)
+
+
+def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | None = None) -> None:
+    """Overlay (recording, simulation, simulation + missing physics) and/or the smoothed
+    residual before and, on its own scale, after adding the missing physics, per channel
+    (default all); mismatch intervals shaded."""
+    plt = pyplot()
+    problem, rec = d.problem, d.recording
+    residuals = ("before", "after") if d.selection.subset else ("before",)
+    kinds = {"both": ("overlay",) + residuals, "overlay": ("overlay",), "residual": residuals}[panels]
+    rows = [(c, k) for c in (channels or problem.channels) for k in kinds]
+    heights = [1.5 if k == "overlay" else 1.0 for _, k in rows]
+    fig, axes = plt.subplots(len(rows), 1, figsize=(9, 1.9 * sum(heights) + 0.8), sharex=True,
+                             constrained_layout=True, squeeze=False, gridspec_kw={"height_ratios": heights})
+    t_model, t_dec = problem.band.t_model, problem.band.t_dec
+    base, improved = problem.predict(d.baseline.params), problem.predict(d.improved.params)
+    found = ", ".join(m["mechanism"].replace("_", " ") for m in d.mechanisms) or "nothing missing"
+    raw = {"thrust_N": rec.thrust_N, "torque_Nmm": rec.torque_Nmm}
+    for ax, (c, kind) in zip(axes[:, 0], rows):
+        k = problem.channels.index(c)
+        name, unit = UNITS[c]
+        _shade(ax, d, c)
+        if kind == "overlay":
+            ax.plot(rec.time_s, raw[c], color="0.75", lw=0.4, label="recording")
+            ax.plot(t_dec, problem.y[k], "k.", ms=3, label="recording, smoothed")
+            ax.plot(t_model, base[c], color="tab:blue", lw=1.2, ls="--", label="simulation")
+            if d.selection.subset:
+                ax.plot(t_model, improved[c], color="tab:red", lw=1.2, label=f"+ {found}")
+            ax.set_ylabel(f"{name} [{unit}]")
+        else:
+            fit, color, label = ((d.baseline, "tab:blue", "recording − simulation") if kind == "before" else
+                                 (d.improved, "tab:red", "after adding the missing physics"))
+            sd = 3 * problem.sigma[k]
+            ax.fill_between(t_dec, -sd, sd, color="0.85", lw=0, label="±3σ noise")
+            ax.plot(t_dec, problem.y[k] - fit.model[k], color=color, lw=1, marker=".", ms=3, label=label)
+            ax.axhline(0, color="0.3", lw=0.6)
+            ax.set_ylabel(f"{name} residual\n[{unit}]")
+        ax.grid(True, alpha=0.3)
+        ax.legend(fontsize=7, loc="best", framealpha=0.85)
+    axes[-1, 0].set_xlabel("time [s]")
+    fig.suptitle(f"{rec.name}: {found} (shaded: mismatch beyond noise)", fontsize=10)
+    save(fig, path)
+
+
+def write_json(path, d: Diagnosis) -> None:
+    """The JSON contract (:meth:`Diagnosis.to_json`), written atomically."""
+    atomic.write_text(path, json.dumps(d.to_json(), indent=2) + "\n")
+
+
+def markdown(d: Diagnosis, summary: str) -> str:
+    """report.md: the summary, both figures, each mechanism's parameters and the best subsets."""
+    js = d.to_json()
+    lines = [f"# Diagnosis of {d.recording.name}", "", "```", summary, "```", "",
+             "![overlay](overlay.png)", "", "![residuals](residuals.png)", "",
+             "## Mechanisms", ""]
+    if not d.mechanisms:
+        lines.append("None: the simulation explains the recording within the noise.")
+    for m in d.mechanisms:
+        lines += [f"### {m['mechanism']} (confidence {m['confidence']:.3f})", "", m["explanation"], "",
+                  "| parameter | value |", "|---|---|"]
+        lines += [f"| {k} | {v} |" for k, v in m["parameters"].items()]
+        lines.append("")
+    lines += ["## Candidate subsets (BIC, lowest first)", "", "| mechanisms | BIC |", "|---|---|"]
+    lines += [f"| {s} | {b:.1f} |" for s, b in list(js["selection"]["bic"].items())[:8]]
+    if js["selection"]["not_selected"]:
+        lines += ["", "Considered and not kept:", ""]
+        lines += [f"- {m}: {why}" for m, why in js["selection"]["not_selected"].items()]
+    lines += ["", "Machine-readable: [diagnosis.json](diagnosis.json).", ""]
+    return "\n".join(lines)
+
+
+def write_report(folder, d: Diagnosis, summary: str) -> None:
+    """``folder``/report.md, overlay.png, residuals.png and diagnosis.json (written atomically)."""
+    with atomic.atomic_folder(folder) as tmp:
+        plot(tmp / "overlay.png", d, "overlay")
+        plot(tmp / "residuals.png", d, "residual")
+        write_json(tmp / "diagnosis.json", d)
+        (tmp / "report.md").write_text(markdown(d, summary), encoding="utf-8")

@@ -1,0 +1,167 @@
+"""Which mechanisms are missing: information criterion, held-out prediction, effect size.
+
+1. BIC of every subset s on the effective sample count n_eff (see :mod:`.band`):
+
+       BIC(s) = χ²(s) · n_eff/n + k(s) ln n_eff,
+
+   where χ² uses the data's noise level, inflated per channel by the misfit of the largest
+   model, κ² = max(1, χ²_full / (n − k_full)), so that a simulation error no mechanism
+   explains does not make every mechanism look significant.
+2. Starting from the best subset, a mechanism is dropped while any one fails:
+   - drop-one ΔBIC = BIC(s − m) − BIC(s) ≥ ``MIN_DELTA_BIC`` ("very strong" evidence on the
+     Kass–Raftery scale);
+   - a physically meaningful size (``THRESHOLDS``, below);
+   - held-out prediction: in a K-fold split into interleaved segments of ``SEGMENT_S``, the
+     subset with the mechanism predicts the held-out segments better than without it.
+3. Confidence of each mechanism: its posterior inclusion probability from the BIC weights
+   exp(−BIC/2) of all subsets (the share of evidence carried by subsets that contain it).
+4. Residual check: χ²/dof of the selected model against the noise level (p-value of the
+   χ² test) says whether what remains is noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from femstudy.diagnosis.fit import Fit, fit_subset, project
+from femstudy.diagnosis.mechanisms import Problem
+
+MIN_DELTA_BIC = 10.0
+#: A residual χ² test p-value at or below this is "not consistent with noise".
+RESIDUAL_P = 1e-3
+FOLDS = 5
+SEGMENT_S = 1.0
+#: Smallest sizes that count as missing physics: clogging rise by breakthrough and softening
+#: loss by the end of the cut (fractions of the load), pulsation amplitude (fraction of the
+#: feed), drift over the recording (fraction of the peak simulated load). They keep a mechanism
+#: from soaking up a small simulation error in the cut; a drift shows outside the cut too, so
+#: its floor is low.
+MIN_CLOGGING_RISE = 0.03
+MIN_PULSATION_AMPLITUDE = 0.02
+MIN_DRIFT_FRACTION = 0.001
+MIN_SOFTENING_LOSS = 0.03
+
+
+@dataclass
+class Selection:
+    """The selected subset and the evidence for it."""
+
+    subset: frozenset
+    bic: dict                    # subset -> BIC
+    confidence: dict             # mechanism -> posterior inclusion probability
+    dropped: dict                # mechanism -> reason it was not kept
+    held_out: dict               # subset -> held-out χ²
+    chi2_per_dof: float
+    residual_p_value: float
+    inflation: np.ndarray
+
+
+def bic_table(problem: Problem, fits: dict) -> tuple[dict, np.ndarray]:
+    """BIC of every subset and the per-channel misfit inflation κ² (item 1 of the module)."""
+    full = max(fits, key=len)
+    n = problem.y.size
+    n_eff = n * problem.band.n_eff_factor
+    per_channel = problem.y.shape[1]
+    k_full = fits[full].n_params
+    inflation = np.maximum(1.0, fits[full].chi2 / (per_channel * (1 - k_full / n)))
+    table = {s: float(np.sum(f.chi2 / inflation)) * problem.band.n_eff_factor + f.n_params * math.log(n_eff)
+             for s, f in fits.items()}
+    return table, inflation
+
+
+def effect_sizes(problem: Problem, fit: Fit) -> dict:
+    """Size of each mechanism of a fit, in the units the thresholds use."""
+    p, g = fit.params, problem.geometry
+    sizes = {}
+    peak = max(float(np.max(np.abs(problem.simulation.loads(problem.band.t_model - p["shift_s"])[0]))), 1e-9)
+    if "growth_exponent" in p:
+        z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
+        sizes["chip_clogging"] = math.expm1(p["growth_exponent"] * z_max)
+    if "pulsation_a" in p:
+        sizes["feed_pulsation"] = math.hypot(p["pulsation_a"], p["pulsation_b"])
+    if "thrust_N_drift_per_s" in p:
+        span = problem.band.t_dec[-1] - problem.band.t_dec[0]
+        fractions = [abs(p["thrust_N_drift_per_s"]) * span / peak]
+        if "torque_Nmm_drift_per_s" in p:
+            torque = problem.simulation.loads(problem.band.t_model - p["shift_s"])[1]
+            fractions.append(abs(p["torque_Nmm_drift_per_s"]) * span / max(float(np.max(np.abs(torque))), 1e-9))
+        sizes["sensor_drift"] = max(fractions)
+    if "softening_fraction" in p:
+        cut = problem.simulation.stop_s - problem.simulation.contact_s
+        if not math.isfinite(cut):
+            cut = problem.band.t_dec[-1] - problem.simulation.contact_s
+        sizes["thermal_softening"] = p["softening_fraction"] * -math.expm1(-cut / 10 ** p["softening_log10_tau_s"])
+    return sizes
+
+
+THRESHOLDS = {"chip_clogging": MIN_CLOGGING_RISE, "feed_pulsation": MIN_PULSATION_AMPLITUDE,
+              "sensor_drift": MIN_DRIFT_FRACTION, "thermal_softening": MIN_SOFTENING_LOSS}
+
+
+def folds(problem: Problem) -> list[np.ndarray]:
+    """Row masks of the held-out segments of each fold (interleaved segments of SEGMENT_S)."""
+    t = problem.band.t_dec
+    segment = np.floor((t - t[0]) / SEGMENT_S).astype(int) % FOLDS
+    return [segment == k for k in range(FOLDS)]
+
+
+def held_out_chi2(problem: Problem, fit: Fit, inflation: np.ndarray) -> float:
+    """Σ over folds of the χ² of held-out segments, each predicted by a fit on the others. The
+    alignment (shift, stop depth) stays at the full fit's values: it is pinned by a few instants
+    (the ramp, the stop) that a fold may hold out, and it is not what is being tested."""
+    names = problem.nonlinear_names(fit.subset, fit.pulse)
+    start = {n: fit.params[n] for n in names}
+    alignment = {n: fit.params[n] for n in problem.nonlinear_names(frozenset())}
+    total = 0.0
+    for held in folds(problem):
+        f = fit_subset(problem, fit.subset, [start], rows=~held, pulse=fit.pulse, fixed=alignment)
+        nonlinear = {n: f.params[n] for n in names}
+        res, _, _ = project(problem, fit.subset, nonlinear, rows=~held)
+        total += float(sum(np.sum(r[held] ** 2) / k for r, k in zip(res, inflation)))
+    return total
+
+
+def select(problem: Problem, fits: dict) -> Selection:
+    """The selected subset, with the evidence (see the module docstring)."""
+    bic, inflation = bic_table(problem, fits)
+    best = min(bic, key=bic.get)
+    weights = {s: math.exp(-(b - bic[best]) / 2) for s, b in bic.items()}
+    total = sum(weights.values())
+    mechanisms = {m for s in fits for m in s}
+    confidence = {m: sum(w for s, w in weights.items() if m in s) / total for m in mechanisms}
+
+    dropped, held_out = {}, {}
+    subset = best
+    while subset:
+        reasons = {}
+        sizes = effect_sizes(problem, fits[subset])
+        for m in subset:
+            delta = bic[subset - {m}] - bic[subset]
+            if delta < MIN_DELTA_BIC:
+                reasons[m] = (delta, f"drop-one BIC difference {delta:.1f} < {MIN_DELTA_BIC:g}")
+            elif sizes[m] < THRESHOLDS[m]:
+                reasons[m] = (delta, f"size {sizes[m]:.3g} below {THRESHOLDS[m]:g}")
+        if not reasons:
+            for s in [subset] + [subset - {m} for m in subset]:
+                if s not in held_out:
+                    held_out[s] = held_out_chi2(problem, fits[s], inflation)
+            for m in subset:
+                if held_out[subset - {m}] <= held_out[subset]:
+                    reasons[m] = (held_out[subset - {m}] - held_out[subset],
+                                  f"does not improve held-out prediction "
+                                  f"({held_out[subset]:.1f} with, {held_out[subset - {m}]:.1f} without)")
+        if not reasons:
+            break
+        worst = min(reasons, key=lambda m: reasons[m][0])
+        dropped[worst] = reasons[worst][1]
+        subset = subset - {worst}
+
+    fit = fits[subset]
+    dof = max(problem.y.size * problem.band.n_eff_factor - fit.n_params, 1.0)
+    chi2 = fit.chi2_total * problem.band.n_eff_factor
+    return Selection(subset, bic, confidence, dropped, held_out, chi2 / dof,
+                     float(stats.chi2.sf(chi2, dof)), inflation)

@@ -1,0 +1,155 @@
+"""``femstudy diagnose`` end to end: outputs, the JSON contract, a simulation on another time base, and
+bad input (one clear line, exit 2, nothing written)."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from conftest import assert_clean_failure, run_cli
+from femstudy.recordings import (Effects, FeedPulsation, Noise, SpindleRipple, ThermalSoftening, synthesize,
+                                 write_recording)
+
+NUISANCE = dict(noise=Noise(0.3, 1.0), ripple=SpindleRipple(0.05), drift=None, softening=None)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """A clogging recording with feed pulsation (1 kHz, 9.5 s); an Allotta and a clogging simulation
+    at 250 Hz that start 1.5 s later and end 1 s earlier, torque in N·m."""
+    folder = tmp_path_factory.mktemp("diagnose")
+    rec = synthesize(1.5, 1500, mu_f=0.07, effects=Effects(**NUISANCE, pulsation=FeedPulsation(0.3, 1.2, 0.4)),
+                     seed=5)
+    write_recording(folder / "rec.csv", rec)
+    quiet = synthesize(1.5, 1500, mu_f=0.07, effects=Effects(**NUISANCE, pulsation=None), seed=6)
+    write_recording(folder / "quiet.csv", quiet)
+    for model in ("allotta", "clogging"):
+        sim = synthesize(1.5, 1500, mu_f=0.07, model=model, effects=Effects.none(), sample_rate_hz=250,
+                         approach_s=0.5, tail_s=1.0)
+        write_recording(folder / f"{model}.csv", replace(sim, time_s=sim.time_s + 1.5), torque_unit="Nm")
+    return folder
+
+
+def test_pulsation_and_clogging_found_against_an_allotta_trace_on_another_time_base(files, tmp_path):
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(files / "allotta.csv"),
+                   "--json", str(out), "--plot", str(tmp_path / "d.png"), "--report", str(tmp_path / "report"))
+    assert proc.returncode == 0, proc.stderr
+    js = json.loads(out.read_text())
+    assert sorted(m["mechanism"] for m in js["missing_physics"]) == ["chip_clogging", "feed_pulsation"]
+    assert js["fit"]["improved"]["r2"] > 0.999 > js["fit"]["baseline"]["r2"]
+    assert {m["channel"] for m in js["mismatch"]} == {"thrust_N", "torque_Nmm"}
+    puls = next(m for m in js["missing_physics"] if m["mechanism"] == "feed_pulsation")["parameters"]
+    assert puls["frequency_hz"] == pytest.approx(1.2, rel=0.01) and puls["amplitude"] == pytest.approx(0.3, rel=0.03)
+    assert "chip_clogging" in proc.stdout and "implied flute friction" in proc.stdout
+    assert "R2 " in proc.stdout and "consistent with noise" in proc.stdout
+    assert (tmp_path / "d.png").stat().st_size > 30_000
+    report = tmp_path / "report"
+    assert {p.name for p in report.iterdir()} == {"report.md", "overlay.png", "residuals.png", "diagnosis.json"}
+    assert "## Mechanisms" in (report / "report.md").read_text()
+    assert json.loads((report / "diagnosis.json").read_text())["missing_physics"] == js["missing_physics"]
+
+
+def test_complete_simulation_reports_nothing(files, tmp_path):
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(files / "quiet.csv"), "--simulation", str(files / "clogging.csv"),
+                   "--json", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    js = json.loads(out.read_text())
+    assert js["missing_physics"] == [] and js["mismatch"] == []
+    assert "missing physics: none" in proc.stdout and proc.stderr == ""
+
+
+def _bad_files(folder):
+    """Recordings and simulations that must be refused."""
+    rec = synthesize(1.5, 1500, effects=Effects(**NUISANCE, pulsation=None), seed=1)
+    write_recording(folder / "other_feed.csv", replace(rec, metadata={**rec.metadata, "feed_mm_s": 2.0}))
+    write_recording(folder / "zero.csv", replace(rec, thrust_N=0 * rec.thrust_N, torque_Nmm=None))
+    short = synthesize(1.5, 1500, effects=Effects.none(), approach_s=0.2, stop_depth_mm=1.0, tail_s=0.2)
+    write_recording(folder / "short.csv", short)
+    meta = {k: v for k, v in rec.metadata.items() if k != "spindle_rpm"}
+    write_recording(folder / "no_rpm.csv", replace(rec, metadata=meta))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["missing.csv", "--simulation", "{f}/clogging.csv"], "does not exist"),
+    (["{f}/quiet.csv"], "one of the arguments --simulation --model is required"),
+    (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--model", "allotta"], "not allowed with"),
+    (["{f}/quiet.csv", "--simulation", "{f}/other_feed.csv"], "was computed for feed_mm_s = 2.0"),
+    (["{f}/quiet.csv", "--simulation", "{f}/zero.csv"], "thrust_N is constant (0 N)"),
+    (["{f}/short.csv", "--simulation", "{f}/short.csv"], "too short to diagnose"),
+    (["{f}/no_rpm.csv", "--simulation", "{f}/clogging.csv"], "has no spindle_rpm"),
+    (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--cortex-mm", "0"], "--cortex-mm must be positive"),
+    (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--plot", "{out}.txt"], "--plot must end in"),
+    (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--bone", "goat"], "unknown bone coefficient set"),
+    (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--set", "feed_mm_s"], "--set expects KEY=VALUE"),
+])
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(files, tmp_path, args, message):
+    if not (files / "short.csv").exists():
+        _bad_files(files)
+    out = tmp_path / "d"
+    args = [a.format(f=files, out=out) for a in args] + ["--json", f"{out}.json", "--quiet"]
+    proc = run_cli("diagnose", *args)
+    assert proc.returncode == 2
+    assert_clean_failure(proc, message)
+    assert len(proc.stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_no_torque_in_the_recording_diagnoses_thrust_alone(files, tmp_path):
+    rec = synthesize(1.5, 1500, mu_f=0.07, effects=Effects(**NUISANCE, pulsation=None), seed=8)
+    write_recording(tmp_path / "thrust_only.csv", replace(rec, torque_Nmm=None))
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(tmp_path / "thrust_only.csv"), "--simulation", str(files / "allotta.csv"),
+                   "--json", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    js = json.loads(out.read_text())
+    assert [m["mechanism"] for m in js["missing_physics"]] == ["chip_clogging"]
+    assert set(js["fit"]["channels"]) == {"thrust_N"} and set(js["noise"]) == {"thrust_N"}
+    assert np.isclose(js["noise"]["thrust_N"], 0.3, rtol=0.05)
+
+
+def test_load_model_path_finds_softening_and_is_silent_when_complete(tmp_path):
+    """--model: the bone set's load model from the detected contact; friction of the bone set."""
+    quiet = synthesize(1.5, 1500, effects=Effects(**NUISANCE, pulsation=None), seed=9, approach_s=1.5)
+    soft = synthesize(1.5, 1500, effects=Effects(**{**NUISANCE, "softening": ThermalSoftening(0.2, 1.5)},
+                                                 pulsation=None), seed=10, approach_s=1.5)
+    for name, rec, expected in (("quiet", quiet, []), ("soft", soft, ["thermal_softening"])):
+        write_recording(tmp_path / f"{name}.csv", rec)
+        out = tmp_path / f"{name}.json"
+        proc = run_cli("diagnose", str(tmp_path / f"{name}.csv"), "--model", "clogging", "--json", str(out), "--quiet")
+        assert proc.returncode == 0, proc.stderr
+        js = json.loads(out.read_text())
+        assert [m["mechanism"] for m in js["missing_physics"]] == expected, js["selection"]
+        assert "load model 'clogging'" in proc.stdout
+    p = js["missing_physics"][0]["parameters"]
+    assert p["fraction"] == pytest.approx(0.2, rel=0.1) and p["time_constant_s"] == pytest.approx(1.5, rel=0.25)
+
+
+def test_simulation_without_a_header_takes_feed_and_speed_from_the_recording(files, tmp_path):
+    """An FE trace as plain columns (no '#' metadata lines)."""
+    lines = (files / "allotta.csv").read_text().splitlines()
+    (tmp_path / "bare.csv").write_text("\n".join(line for line in lines if not line.startswith("#")) + "\n")
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(tmp_path / "bare.csv"),
+                   "--json", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(m["mechanism"] for m in json.loads(out.read_text())["missing_physics"]) == \
+        ["chip_clogging", "feed_pulsation"]
+
+
+def test_simulation_on_its_own_clock_is_placed_at_the_detected_contact(files, tmp_path):
+    """An FE history starts at contact (t = 0); the recording's contact is 2 s in."""
+    from femstudy.recordings import read_recording
+
+    sim = read_recording(files / "allotta.csv")
+    write_recording(tmp_path / "from_contact.csv", replace(sim, time_s=sim.time_s - 2.0))
+    out = tmp_path / "d.json"
+    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(tmp_path / "from_contact.csv"),
+                   "--json", str(out), "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    js = json.loads(out.read_text())
+    assert sorted(m["mechanism"] for m in js["missing_physics"]) == ["chip_clogging", "feed_pulsation"]
+    (note,) = [n for n in js["notes"] if "runs on another clock" in n]
+    assert float(note.split("shifted by ")[1].split(" s ")[0]) == pytest.approx(2.0, abs=0.1)

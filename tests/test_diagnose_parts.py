@@ -1,0 +1,142 @@
+"""The pieces of the diagnosis: noise level, smoothing operator, forward model, mismatch location."""
+
+import math
+
+import numpy as np
+import pytest
+
+from femstudy.diagnosis.band import make_band, white_noise_sigma
+from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
+from femstudy.diagnosis.diagnose import align, build_problem
+from femstudy.diagnosis.locate import mismatch_intervals
+from femstudy.drilling.history import DrillingConditions
+from femstudy.recordings import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, ThermalSoftening, synthesize
+from femstudy.recordings.synthetic import fixed_friction_bone
+
+
+@pytest.mark.parametrize("rate, n", [(1000, 20000), (200, 2000)])
+def test_white_noise_level_is_unbiased_within_three_percent(rate, n):
+    rng = np.random.default_rng(1)
+    t = np.arange(n) / rate
+    estimates = [white_noise_sigma(t, rng.normal(0, 0.7, n)) for _ in range(10)]
+    assert np.mean(estimates) == pytest.approx(0.7, rel=0.03)
+
+
+def test_noise_level_ignores_spindle_ripple_and_the_cut():
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.4, 1.3), SpindleRipple(0.08), None, None, None), seed=2)
+    clean = synthesize(1.5, 1500, effects=Effects.none())
+    # a ripple of 8 % of ~35 N (2.8 N) is seven times the noise, yet the level is the noise's
+    assert white_noise_sigma(rec.time_s, rec.thrust_N - clean.thrust_N) == pytest.approx(0.4, rel=0.05)
+    assert white_noise_sigma(rec.time_s, rec.torque_Nmm - clean.torque_Nmm) == pytest.approx(1.3, rel=0.05)
+
+
+def test_smoothing_is_the_same_on_recording_samples_and_on_the_model_grid():
+    """The same continuous kernel on a 1 kHz recording and a ~115 Hz model grid: a clean
+    recording and its own model, smoothed each way, agree to under 0.2 noise units, and the
+    spindle ripple is gone."""
+    for rate in (1000.0, 200.0):
+        rec = synthesize(1.5, 1500, effects=Effects(None, SpindleRipple(0.05), None, None, None), sample_rate_hz=rate)
+        sim = synthesize(1.5, 1500, effects=Effects.none(), sample_rate_hz=333)
+        band = make_band(rec.time_s, 1500, rec.time_s[0], rec.time_s[-1])
+        on_samples = band.smooth(rec.thrust_N)
+        on_grid = band.smooth_model(np.interp(band.t_model, sim.time_s, sim.thrust_N))
+        sigma = 0.3 * band.noise_gain  # smoothed noise of a 0.3 N sensor
+        assert np.max(np.abs(on_samples - on_grid) / sigma) < 0.2
+    assert band.correlation == pytest.approx(math.exp(-3.5 ** 2 / 4))
+
+
+@pytest.mark.parametrize("shape", ["sine", "pulse"])
+def test_forward_model_reproduces_the_generator_at_the_true_parameters(shape):
+    """Pulsed feed (depth lead and load scaling), clogging and softening, against an Allotta
+    trace: equal to the synthetic recording to 1 mN except at the two samples where the feed stops."""
+    A, f_p, phase = 0.3, 0.7, 1.1
+    for stop in (None, 4.0):  # through the cortex, and retraction inside it
+        effects = Effects(None, None, FeedPulsation(A, f_p, phase, shape), None, ThermalSoftening(0.2, 1.5))
+        rec = synthesize(1.5, 1500, mu_f=0.07, effects=effects, stop_depth_mm=stop)
+        sim = synthesize(1.5, 1500, mu_f=0.07, model="allotta", effects=Effects.none(), stop_depth_mm=stop)
+        problem, _ = build_problem(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
+        params = {"shift_s": 0.0, "growth_exponent": rec.metadata["true_growth_exponent"],
+                  "pulsation_a": A * math.cos(phase), "pulsation_b": A * math.sin(phase),
+                  "pulsation_frequency_hz": f_p, "softening_fraction": 0.2, "softening_log10_tau_s": math.log10(1.5),
+                  "pulsation_sharpness": 3.0 if shape == "pulse" else 0.0}  # the generator's tanh(3 sin)/tanh 3
+        model = problem.terms(params, t=rec.time_s)["thrust_N"]
+        off = np.abs(rec.thrust_N - model) > 1e-3
+        assert np.count_nonzero(off) <= 2
+        assert np.all(np.abs(rec.time_s[off] - rec.metadata["true_retraction_s"]) < 0.05)
+
+
+def test_trace_contact_and_stop_are_read_from_the_trace():
+    sim = synthesize(1.2, 1200, effects=Effects.none(), sample_rate_hz=250, approach_s=1.3)
+    trace = TraceSimulation.from_recording(sim, 1200)
+    assert trace.contact_s == pytest.approx(1.3, abs=1e-9)  # the linear entry ramp extrapolated to zero
+    assert trace.stop_s == pytest.approx(sim.metadata["true_retraction_s"], abs=1e-6)
+    assert trace.span() == (-math.inf, math.inf)  # unloaded at both ends: continued by zero
+
+
+def test_trace_that_ends_loaded_limits_the_comparison_to_its_span():
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), None, None, None, None))
+    sim = synthesize(1.5, 1500, effects=Effects.none())
+    cut = sim.time_s < 5.0  # the simulation stops in mid-cortex, loaded
+    trace = TraceSimulation(sim.time_s[cut], sim.thrust_N[cut], sim.torque_Nmm[cut], 1500)
+    assert trace.span() == (-math.inf, pytest.approx(sim.time_s[cut][-1]))
+    problem, notes = build_problem(rec, trace, 6.0)
+    assert problem.band.t_dec[-1] <= 5.0 and "compared over" in notes[0]
+
+
+def test_a_simulation_outside_the_recording_is_refused():
+    from femstudy.errors import UserError
+
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), None, None, None, None))
+    sim = synthesize(1.5, 1500, effects=Effects.none())
+    late = TraceSimulation(sim.time_s + 100.0, sim.thrust_N, sim.torque_Nmm, 1500)
+    with pytest.raises(UserError, match="does not overlap recording"):
+        build_problem(rec, late, 6.0)
+
+
+def test_alignment_finds_a_clock_offset_and_tare_despite_missing_clogging():
+    """Clogging adds up to 130 % after full engagement; the robust alignment still reads the
+    offset from the entry ramp and the tare from the unloaded stretches."""
+    effects = Effects(Noise(0.3, 1.0), None, None, SensorDrift(0.0, 0.0, 0.8, 3.0), None)
+    rec = synthesize(1.5, 1500, effects=effects)
+    sim = synthesize(1.5, 1500, model="allotta", effects=Effects.none(), approach_s=1.9)  # contact 0.1 s early
+    problem, _ = build_problem(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
+    fit = align(problem)
+    assert fit.params["shift_s"] == pytest.approx(0.1, abs=0.005)
+    assert fit.params["thrust_N_tare"] == pytest.approx(0.8, abs=0.05)
+    assert fit.params["torque_Nmm_tare"] == pytest.approx(3.0, abs=0.2)
+
+
+def test_load_model_simulation_is_the_load_model_from_contact_to_stop():
+    cond = DrillingConditions(1.5, 1500, 6.0, fixed_friction_bone(0.2, 0.58, 448.5, 25.5))
+    rec = synthesize(1.5, 1500, mu_f=0.2, mu_w=0.58, effects=Effects.none(), approach_s=2.0)
+    sim = ModelSimulation("clogging", cond, contact_s=2.0, stop_depth_mm=8.0)
+    F, T = sim.loads(rec.time_s)
+    np.testing.assert_allclose(F, rec.thrust_N, atol=2e-3 * rec.thrust_N.max())
+    np.testing.assert_allclose(T, rec.torque_Nmm, atol=2e-3 * rec.torque_Nmm.max())
+
+
+def test_mismatch_intervals_silent_on_noise_and_located_on_a_bump():
+    rng = np.random.default_rng(0)
+    t = np.arange(200) * 0.12
+    assert mismatch_intervals(t, rng.normal(size=t.size), 0.9, "thrust_N") == []
+    z = rng.normal(size=t.size)
+    z[(t > 8.0) & (t < 10.0)] += 12.0
+    (interval,) = mismatch_intervals(t, z, 0.9, "thrust_N")
+    assert interval["start_s"] == pytest.approx(8.0, abs=0.15) and interval["end_s"] == pytest.approx(10.0, abs=0.15)
+    assert interval["significance"] > 50 and interval["channel"] == "thrust_N"
+    z[50] = 1e4  # far beyond the floating-point range of the exact tail: still a finite significance
+    assert all(math.isfinite(i["significance"]) for i in mismatch_intervals(t, z, 0.9, "thrust_N"))
+
+
+def test_mis_scaled_simulation_is_a_calibration_not_missing_physics():
+    """A simulation with a 5 % low cortical cutting energy u1: located as a mismatch, explained
+    by the scale on the simulated loads (calibration), no mechanism reported."""
+    from femstudy.diagnosis.diagnose import diagnose
+
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), SpindleRipple(0.05), None, None, None), seed=4)
+    sim = synthesize(1.5, 1500, u1_MPa=0.95 * 448.5, effects=Effects.none(), sample_rate_hz=500)
+    d = diagnose(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
+    js = d.to_json()
+    assert js["missing_physics"] == [] and js["mismatch"]
+    assert js["calibration"]["thrust_N_scale"] == pytest.approx(1 / 0.95, rel=0.01)
+    assert js["calibration"]["torque_Nmm_scale"] == pytest.approx(1 / 0.95, rel=0.01)
