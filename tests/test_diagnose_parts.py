@@ -11,7 +11,6 @@ from femstudy.diagnosis.diagnose import align, build_problem
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.drilling.history import DrillingConditions
 from femstudy.recordings import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, ThermalSoftening, synthesize
-from femstudy.recordings.synthetic import fixed_friction_bone
 
 
 @pytest.mark.parametrize("rate, n", [(1000, 20000), (200, 2000)])
@@ -107,7 +106,7 @@ def test_alignment_finds_a_clock_offset_and_tare_despite_missing_clogging():
 
 
 def test_load_model_simulation_is_the_load_model_from_contact_to_stop():
-    cond = DrillingConditions(1.5, 1500, 6.0, fixed_friction_bone(0.2, 0.58, 448.5, 25.5))
+    cond = DrillingConditions(1.5, 1500, 6.0, friction_override=(0.2, 0.58))
     rec = synthesize(1.5, 1500, mu_f=0.2, mu_w=0.58, effects=Effects.none(), approach_s=2.0)
     sim = ModelSimulation("clogging", cond, contact_s=2.0, stop_depth_mm=8.0)
     F, T = sim.loads(rec.time_s)
