@@ -14,7 +14,7 @@ from femstudy import __version__
 from femstudy.errors import UserError
 
 #: Sub-command modules, in the order ``femstudy --help`` lists them.
-COMMANDS = ["loads"]
+COMMANDS = ["loads", "femur", "mesh"]
 
 
 class _Parser(argparse.ArgumentParser):
