@@ -72,7 +72,7 @@ class Frame:
     def as_dict(self) -> dict:
         d = asdict(self)
         for k in ("up", "anterior", "medial"):
-            d[k] = [round(float(c), 6) for c in d[k]]
+            d[k] = [float(c) for c in d[k]]
         return d
 
     @classmethod

@@ -49,7 +49,9 @@ def refine(mesh: TetMesh, target, max_rounds: int = 60) -> TetMesh:
     for _ in range(max_rounds):
         v = x[tets]
         lengths = np.stack([np.linalg.norm(v[:, i] - v[:, j], axis=1) for i, j in EDGES], axis=1)
-        longest = lengths.argmax(axis=1)  # ties: the first of EDGES, the same rule in every tet
+        # ties between equal edges are broken by a hash of the edge, the same in every tet
+        codes = _edge_codes(tets, len(x)).astype(np.float64)
+        longest = (lengths + 1e-9 * lengths.max() * ((codes * 0.6180339887498949) % 1.0)).argmax(axis=1)
         lmax = lengths[np.arange(len(tets)), longest]
         need = np.union1d(np.nonzero(lmax > LONGEST_PER_TARGET * target(v.mean(axis=1)))[0], pending)
         if len(need) == 0:

@@ -85,7 +85,37 @@ def classify(points, tets, fields, frame, canal_span) -> np.ndarray:
     proximal = frame.fraction(centroids) < mid
     region[inner & proximal] = CANCELLOUS_PROXIMAL
     region[inner & ~proximal] = CANCELLOUS_DISTAL
-    return _largest_component(tets, region)
+    return _manifold_boundary(tets, _largest_component(tets, region))
+
+
+def _manifold_boundary(tets, region, rounds: int = 10) -> np.ndarray:
+    """Fill empty tets around boundary edges shared by more than two boundary faces.
+
+    Where the canal's end meets cancellous bone, two empty pockets can touch along an edge
+    of the mesh, pinching the boundary there; the empty tets around such an edge get the
+    region most common among the bone tets around it.
+    """
+    region = region.copy()
+    pairs = [(i, j) for i in range(4) for j in range(i + 1, 4)]
+    for _ in range(rounds):
+        kept = region > 0
+        t = tets[kept]
+        faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 2, 3]], t[:, [0, 1, 3]], t[:, [0, 1, 2]]])
+        key, counts = np.unique(np.sort(faces, axis=1), axis=0, return_counts=True)
+        boundary = key[counts == 1]
+        edges = np.sort(np.concatenate([boundary[:, [0, 1]], boundary[:, [1, 2]], boundary[:, [0, 2]]]), axis=1)
+        e, c = np.unique(edges, axis=0, return_counts=True)
+        bad = e[c > 2]
+        if len(bad) == 0:
+            break
+        n = tets.max() + 1
+        all_edges = np.sort(np.concatenate([tets[:, [i, j]] for i, j in pairs]), axis=1)
+        owner = np.tile(np.arange(len(tets)), len(pairs))
+        hit = np.isin(all_edges[:, 0] * n + all_edges[:, 1], bad[:, 0] * n + bad[:, 1])
+        around = np.unique(owner[hit])
+        solid = region[around][region[around] > 0]
+        region[around[region[around] == 0]] = np.bincount(solid).argmax()
+    return region
 
 
 def _largest_component(tets, region) -> np.ndarray:
