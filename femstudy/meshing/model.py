@@ -128,6 +128,7 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     surf_mm = raw.scaled(frame.scale_to_mm)
     edge = surface_edge_mm(size)
     outer = surface.simplify(surf_mm, edge)
+    console.progress(f"regions: cortex, canal and cancellous fields on a {regions.VOXEL_MM:g} mm grid")
     fields = regions.build_fields(outer, frame, case.geometry)
     inner = _simplified(regions.level_surface(fields, "inner"), edge)
     canal_closed = regions.level_surface(fields, "canal")
