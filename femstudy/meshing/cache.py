@@ -1,8 +1,8 @@
 """On-disk cache of built meshes, keyed by everything that changes them.
 
 The key is the SHA-256 of a canonical JSON document holding the input surface's SHA-256,
-every parameter that changes the mesh, the femstudy version and :data:`LAYOUT` (bumped
-when the meshing pipeline changes its output). An entry is a folder ``<root>/<key>/``
+every parameter that changes the mesh, the femstudy and pytetwild versions and
+:data:`LAYOUT` (bumped when the meshing pipeline changes its output). An entry is a folder ``<root>/<key>/``
 with ``mesh.npz`` (arrays) and ``meta.json`` (metadata and the SHA-256 of ``mesh.npz``),
 written under a temporary name and renamed into place when complete, so an interrupted
 build leaves no entry that looks complete. Loading verifies the checksum; a corrupted entry
@@ -32,9 +32,12 @@ def cache_root() -> Path:
 
 
 def cache_key(parts: dict) -> str:
-    """SHA-256 of the canonical JSON of ``parts`` plus the femstudy version and layout."""
-    doc = json.dumps({"femstudy": __version__, "layout": LAYOUT, **parts}, sort_keys=True,
-                     separators=(",", ":"), default=str)
+    """SHA-256 of the canonical JSON of ``parts`` plus the femstudy and pytetwild versions and
+    the layout (fTetWild is not deterministic, so another version would give another mesh)."""
+    from importlib.metadata import version
+
+    doc = json.dumps({"femstudy": __version__, "pytetwild": version("pytetwild"), "layout": LAYOUT, **parts},
+                     sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(doc.encode()).hexdigest()
 
 

@@ -124,7 +124,7 @@ def drill_site(mesh: TetMesh, frame: Frame, faces_outer: np.ndarray, site, centr
     side = frame.direction(site.direction)
     direction = -(side - (side @ frame.up) * frame.up)
     direction /= np.linalg.norm(direction)
-    return DrillSite(site.name, entry, normal, direction, cortical_depth(mesh, entry, direction))
+    return DrillSite(site.name, entry, normal, direction, round(cortical_depth(mesh, entry, direction), 3))
 
 
 def cortical_depth(mesh: TetMesh, entry, direction, step_mm: float = 0.02, max_mm: float = 60.0) -> float:
