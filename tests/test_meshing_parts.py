@@ -176,3 +176,27 @@ def test_cortex_filling_the_bone_is_a_user_error(femur):
     with pytest.raises(UserError, match="fills the whole bone"):
         regions.build_fields(femur, frame, GeometrySpec(cortex=CortexSpec(midshaft_mm=40, epiphysis_mm=40)),
                              voxel_mm=3.0)
+
+
+def test_pinched_boundary_is_filled():
+    """Two solid blocks touching along one edge only: the empty tets around that edge are
+    filled with the region of the solid tets around it, and the boundary becomes manifold."""
+    import pyvista as pv
+
+    grid = pv.ImageData(dimensions=(3, 3, 2)).to_tetrahedra()
+    x = np.asarray(grid.points, float)
+    tets = tetra.orient(x, grid.cells_dict[10].astype(np.int64))
+    c = x[tets].mean(axis=1)
+    diagonal = (c[:, 0] < 1) == (c[:, 1] < 1)  # blocks (0, 0) and (1, 1) share the edge x = y = 1
+    region = np.where(diagonal, np.where(c[:, 0] < 1, 2, 3), 0).astype(np.int8)
+    filled = tetra._manifold_boundary(tets, region)
+    assert ((filled > 0) | ~diagonal).all() and (filled[diagonal] == region[diagonal]).all()
+    new = (filled > 0) & (region == 0)
+    assert new.any() and (np.abs(c[new][:, :2] - 1).max(axis=1) < 1).all()  # only around the edge
+    t = tets[filled > 0]
+    faces = np.sort(np.concatenate([t[:, [1, 2, 3]], t[:, [0, 2, 3]], t[:, [0, 1, 3]], t[:, [0, 1, 2]]]), axis=1)
+    key, counts = np.unique(faces, axis=0, return_counts=True)
+    b = key[counts == 1]
+    _, edge_counts = np.unique(np.sort(np.concatenate([b[:, [0, 1]], b[:, [1, 2]], b[:, [0, 2]]]), axis=1),
+                               axis=0, return_counts=True)
+    assert (edge_counts == 2).all()

@@ -109,12 +109,12 @@ def _manifold_boundary(tets, region, rounds: int = 10) -> np.ndarray:
         if len(bad) == 0:
             break
         n = tets.max() + 1
-        all_edges = np.sort(np.concatenate([tets[:, [i, j]] for i, j in pairs]), axis=1)
+        code = (np.sort(np.concatenate([tets[:, [i, j]] for i, j in pairs]), axis=1) * [n, 1]).sum(axis=1)
         owner = np.tile(np.arange(len(tets)), len(pairs))
-        hit = np.isin(all_edges[:, 0] * n + all_edges[:, 1], bad[:, 0] * n + bad[:, 1])
-        around = np.unique(owner[hit])
-        solid = region[around][region[around] > 0]
-        region[around[region[around] == 0]] = np.bincount(solid).argmax()
+        for edge in bad[:, 0] * n + bad[:, 1]:
+            around = owner[code == edge]
+            solid = region[around][region[around] > 0]
+            region[around[region[around] == 0]] = np.bincount(solid).argmax()
     return region
 
 
