@@ -128,6 +128,8 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     surf_mm = raw.scaled(frame.scale_to_mm)
     edge = surface_edge_mm(size)
     outer = surface.simplify(surf_mm, edge)
+    if len(outer.repairs) > len(raw.repairs):
+        console.progress(outer.repairs[-1])
     console.progress(f"regions: cortex, canal and cancellous fields on a {regions.VOXEL_MM:g} mm grid")
     fields = regions.build_fields(outer, frame, case.geometry)
     inner = _simplified(regions.level_surface(fields, "inner"), edge)
@@ -162,7 +164,7 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
         "input_triangles": {"surface": len(raw.triangles), "tetwild": n_in},
         "surface_edge_mm": edge, "size_mm": size, "envelope": case.mesh.envelope,
         "tetwild_seconds": seconds, "tetwild_background_tets": int(len(tets)),
-        "repairs": raw.repairs, "surface_file": str(path),
+        "repairs": outer.repairs, "surface_file": str(path),
     }
     arrays = {"points": mesh.points, "tets": mesh.tets.astype(np.int32), "region": mesh.region,
               "canal_axis": fields.canal_axis}

@@ -79,7 +79,7 @@ def summary_text(model) -> str:
         "surface nodes",
     ]
     if st.get("repairs"):
-        lines.append("repaired  " + "; ".join(st["repairs"]))
+        lines.append("input     " + "; ".join(st["repairs"]))
     return "\n".join(lines)
 
 
