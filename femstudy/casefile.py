@@ -135,7 +135,9 @@ class ClampSpec(_Section):
 
 
 class SiteSpec(_Section):
-    """Drill site: fraction of the length from the proximal end and a drilling direction."""
+    """Drill site: fraction of the length from the proximal end and the side the drill enters
+    from: ``"anterior"`` enters the anterior cortex and drills posteriorly; a vector names the
+    entry side the same way, pointing from the bone towards the drill (docs/meshing.md)."""
 
     name: str = "mid-diaphysis"
     position: float = Field(0.5, gt=0, lt=1)
