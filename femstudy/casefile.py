@@ -47,9 +47,13 @@ class CortexSpec(_Section):
 
 class CanalSpec(_Section):
     """Empty medullary canal: diameter at mid-shaft and its extent as fractions of length
-    measured from the proximal end (0 = top of the head, 1 = bottom of the condyles)."""
+    measured from the proximal end (0 = top of the head, 1 = bottom of the condyles).
+
+    Cancellous bone between the canal and the cortex thinner than ``min_cancellous_mm`` is
+    not kept: the canal then reaches the cortex (docs/meshing.md)."""
 
     diameter_mm: PositiveMM = 13.0
+    min_cancellous_mm: float = Field(3.0, ge=0, le=20)
     proximal_fraction: float = Field(0.22, gt=0, lt=1)
     distal_fraction: float = Field(0.78, gt=0, lt=1)
 
@@ -131,7 +135,9 @@ class ClampSpec(_Section):
 
 
 class SiteSpec(_Section):
-    """Drill site: fraction of the length from the proximal end and a drilling direction."""
+    """Drill site: fraction of the length from the proximal end and the side the drill enters
+    from: ``"anterior"`` enters the anterior cortex and drills posteriorly; a vector names the
+    entry side the same way, pointing from the bone towards the drill (docs/meshing.md)."""
 
     name: str = "mid-diaphysis"
     position: float = Field(0.5, gt=0, lt=1)

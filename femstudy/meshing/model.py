@@ -1,0 +1,206 @@
+"""``build_femur_model``: from a case to a cached, region-marked tet mesh with landmarks."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from femstudy.console import Console
+from femstudy.errors import UserError
+from femstudy.femur_model import REGION_NAMES, Clamps, DrillSite, TetMesh
+from femstudy.meshing import cache, landmarks
+from femstudy.meshing.frame import Frame
+
+
+@dataclass
+class FemurModel:
+    """A meshed femur: see the module docs of :mod:`femstudy.meshing` for each field."""
+
+    mesh: TetMesh
+    clamps: Clamps
+    site: DrillSite
+    frame: Frame
+    quality: dict
+    stats: dict
+    canal_axis: np.ndarray = field(repr=False, default=None)
+
+
+def surface_edge_mm(size_mm: float) -> float:
+    """Triangle edge the outer and inner surfaces are simplified to before TetWild [mm]:
+    0.6 × size within 2.5-8 mm. TetWild's time grows with its input triangles (17,000 take
+    99 s, 4,200 take 30 s at 12 mm, docs/meshing.md), and the tets are no finer than this anyway;
+    decimation keeps the enclosed volume."""
+    return float(np.clip(0.6 * size_mm, 2.5, 8.0))
+
+
+def _surface_file(case) -> Path:
+    from femstudy.meshing.builtin_femur import BUILTIN_STL, FemurParameters, generate, write_stl
+
+    path = case.surface_path()
+    if path is not None:
+        return path
+    if not BUILTIN_STL.is_file():  # a packaging without the data file: regenerate it once
+        target = cache.cache_root() / "builtin" / BUILTIN_STL.name
+        if not target.is_file():
+            par = FemurParameters()
+            write_stl(target, generate(par), header=f"femstudy built-in femur {par.digest()}")
+        return target
+    return BUILTIN_STL
+
+
+def mesh_parameters(case, size_mm: float) -> dict:
+    """Every case value that changes the tet mesh (the cache key's parameters)."""
+    g = case.geometry.model_dump(mode="json")
+    g.pop("surface")
+    m = case.mesh
+    params = {"geometry": g, "size_mm": size_mm, "refine": m.refine, "envelope": m.envelope}
+    if m.refine == "site":
+        params.update(site_size_mm=m.site_size_mm, site_radius_mm=m.site_radius_mm,
+                      site_position=case.site.position, site_direction=case.site.direction)
+    return params
+
+
+def build_femur_model(case, console: Console | None = None, mesh_size_mm: float | None = None) -> FemurModel:
+    """Mesh the case's femur (or load it from the cache) and locate its clamps and drill site.
+
+    ``mesh_size_mm`` overrides ``case.mesh.size_mm``.
+    """
+    console = console or Console(quiet=True)
+    size = float(mesh_size_mm if mesh_size_mm is not None else case.mesh.size_mm)
+    if not size > 0:
+        raise UserError(f"mesh size must be positive, got {size:g} mm")
+    path = _surface_file(case)
+    from femstudy.meshing.surface import file_digest
+
+    if not path.is_file():
+        raise UserError(f"surface file {path} does not exist")
+    digest = file_digest(path)
+    key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(case, size)})
+    start = time.perf_counter()
+    hit = cache.load(key)
+    if hit is None:
+        console.progress(f"meshing {path.name} at {size:g} mm (not cached)")
+        arrays, meta = _build(case, path, size, console)
+        cache.store(key, arrays, meta)
+    else:
+        console.progress(f"loaded cached mesh {key[:12]} ({cache.cache_root()})")
+        arrays, meta = hit
+    mesh = TetMesh(arrays["points"], arrays["tets"].astype(np.int64), arrays["region"].astype(np.int8))
+    frame = Frame.from_dict(meta["frame"])
+    outer = landmarks.outer_faces(mesh, frame)
+    clamps = landmarks.clamps(mesh, frame, outer, case.clamps.length_mm)
+    centre = landmarks.section_centre(mesh.points, outer, frame, case.site.position)
+    site = landmarks.drill_site(mesh, frame, outer, case.site, centre)
+    stats = dict(meta["stats"])
+    stats.update(_landmark_stats(mesh, outer, site, clamps))
+    stats.update(cache_hit=hit is not None, cache_key=key, load_or_build_seconds=time.perf_counter() - start)
+    return FemurModel(mesh, clamps, site, frame, meta["quality"], stats, arrays["canal_axis"])
+
+
+def _landmark_stats(mesh, outer, site, clamps) -> dict:
+    """Facets under the drill-load disk and their edge lengths; clamped node counts."""
+    tri = mesh.points[outer]
+    near = np.linalg.norm(tri.mean(axis=1) - site.entry_point, axis=1) < landmarks.DRILL_RADIUS_MM
+    edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
+    return {
+        "site_facets_in_drill_disk": int(near.sum()),
+        "site_edge_mm": float(np.median(edges[near])) if near.any() else float("nan"),
+        "site_cortical_thickness_mm": site.cortical_thickness_mm,
+        "clamped_nodes": {"proximal": int(clamps.proximal.sum()), "distal": int(clamps.distal.sum())},
+    }
+
+
+def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]:
+    from femstudy.meshing import regions, surface, tetra
+    from femstudy.meshing.frame import build_frame
+    from femstudy.meshing.tetra import signed_volumes
+
+    raw = surface.read_surface(path)
+    frame, _ = build_frame(raw.points, raw.triangles, case.geometry)
+    console.progress(f"surface: {len(raw.triangles)} triangles, units {frame.units} "
+                     f"(x{frame.scale_to_mm:g} to mm), {frame.side} femur, length {frame.length_mm:.1f} mm"
+                     + (f"; overridden: {', '.join(frame.overridden)}" if frame.overridden else ""))
+    for note in raw.repairs:
+        console.progress(f"repaired: {note}")
+    surf_mm = raw.scaled(frame.scale_to_mm)
+    edge = surface_edge_mm(size)
+    outer = surface.simplify(surf_mm, edge)
+    if len(outer.repairs) > len(raw.repairs):
+        console.progress(outer.repairs[-1])
+    console.progress(f"regions: cortex, canal and cancellous fields on a {regions.VOXEL_MM:g} mm grid")
+    fields = regions.build_fields(outer, frame, case.geometry)
+    inner = _simplified(regions.level_surface(fields, "inner"), edge)
+    canal_closed = regions.level_surface(fields, "canal")
+    patch = _simplified(regions.level_surface(fields, "canal", clip_by="inner", clip_above=0.25 * fields.spacing), edge)
+    console.progress(f"regions: inner surface {inner.n_cells} triangles, canal {canal_closed.volume:.0f} mm^3")
+    parts = [(outer.points, outer.triangles)] + [(m.points, m.regular_faces) for m in (inner, patch) if m.n_cells]
+    n_in = sum(len(t) for _, t in parts)
+    console.progress(f"TetWild: {n_in} input triangles, target edge {size:g} mm, envelope {case.mesh.envelope:g}")
+    points, tets, seconds = tetra.tetrahedralize(parts, size, case.mesh.envelope)
+    console.progress(f"TetWild finished in {seconds:.1f} s: {len(tets)} tets in its background mesh")
+    region = tetra.classify(points, tets, fields, frame, (case.geometry.canal.proximal_fraction,
+                                                          case.geometry.canal.distal_fraction))
+    mesh = tetra.compact(points, tets, region)
+    if case.mesh.refine == "site":
+        mesh = _refine_site(mesh, frame, case, size)
+        console.progress(f"refined the drill site to {min(case.mesh.site_size_mm, size):g} mm: {mesh.n_tets} tets")
+    quality = tetra.quality(mesh)
+    vol = signed_volumes(mesh.points, mesh.tets)
+    per_region = {REGION_NAMES[r]: {"tets": int((mesh.region == r).sum()), "volume_mm3": float(vol[mesh.region == r].sum())}
+                  for r in REGION_NAMES}
+    missing = [name for name, v in per_region.items() if v["tets"] == 0]
+    if missing:
+        raise UserError(f"the mesh has no {' or '.join(missing)} tets at {size:g} mm; use a smaller "
+                        "mesh.size_mm or check geometry.cortex and geometry.canal")
+    stats = {
+        "n_points": mesh.n_points, "n_tets": mesh.n_tets, "regions": per_region,
+        "tet_volume_mm3": float(vol.sum()),
+        "surface_volume_mm3": surf_mm.volume, "simplified_surface_volume_mm3": outer.volume,
+        "canal_volume_mm3": float(canal_closed.volume),
+        "canal_midshaft_diameter_mm": _midshaft_canal_diameter(fields, frame),
+        "input_triangles": {"surface": len(raw.triangles), "tetwild": n_in},
+        "surface_edge_mm": edge, "size_mm": size, "envelope": case.mesh.envelope,
+        "tetwild_seconds": seconds, "tetwild_background_tets": int(len(tets)),
+        "repairs": outer.repairs, "surface_file": str(path),
+    }
+    arrays = {"points": mesh.points, "tets": mesh.tets.astype(np.int32), "region": mesh.region,
+              "canal_axis": fields.canal_axis}
+    return arrays, {"frame": frame.as_dict(), "quality": quality, "stats": stats}
+
+
+def _refine_site(mesh: TetMesh, frame: Frame, case, size: float) -> TetMesh:
+    """Bisect tets around the drill site's entry point down to ``mesh.site_size_mm``."""
+    from femstudy.meshing import refine
+
+    outer = landmarks.outer_faces(mesh, frame)
+    centre = landmarks.section_centre(mesh.points, outer, frame, case.site.position)
+    entry, _ = landmarks.entry_point(mesh.points[outer], frame, case.site, centre)
+    h_site = min(case.mesh.site_size_mm, size)
+    target = refine.site_target(entry, size, h_site, max(case.mesh.site_radius_mm, 2 * h_site),
+                                core_mm=max(2 * landmarks.DRILL_RADIUS_MM, h_site))
+    return refine.refine(mesh, target)
+
+
+def _simplified(poly, edge_mm: float):
+    """Decimate a level-set surface to triangles of about ``edge_mm``."""
+    if poly.n_cells == 0:
+        return poly
+    target = poly.area / (np.sqrt(3) / 4 * edge_mm ** 2)
+    if target < 0.8 * poly.n_cells:
+        poly = poly.decimate(1.0 - max(target, 50) / poly.n_cells, volume_preservation=True)
+    return poly.clean()
+
+
+def _midshaft_canal_diameter(fields, frame) -> float:
+    """Equivalent diameter √(4A/π) of the canal's cross-section at mid-length [mm]."""
+    h = fields.spacing
+    idx = np.nonzero(fields.canal > 0)
+    if len(idx[0]) == 0:
+        return 0.0
+    x = fields.origin + h * np.column_stack(idx)
+    s = frame.fraction(x)
+    n = (np.abs(s - 0.5) * frame.length_mm < h / 2).sum()
+    return float(np.sqrt(4 * n * h ** 2 / np.pi))

@@ -1,0 +1,237 @@
+"""Reading, checking and preparing a closed bone surface.
+
+A user's STL/OBJ/PLY/VTP/VTK file is read with PyVista (meshio as a fallback for formats
+VTK does not know), triangulated and cleaned (coincident points merged). It must then be a
+closed, edge-manifold, single-shell surface: holes and extra shells are refused with one
+clear sentence, since guessing how to close a bone would silently change its stiffness.
+What *is* repaired (duplicate points, non-triangle faces, degenerate or duplicate triangles,
+inconsistent or inward orientation) is listed in :attr:`Surface.repairs`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from femstudy.errors import UserError, require
+
+SUFFIXES = (".stl", ".obj", ".ply", ".vtp", ".vtk", ".vtu", ".off")
+
+
+@dataclass
+class Surface:
+    """A closed triangulated surface: points (n, 3) and outward-oriented triangles (m, 3)."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    source: str
+    repairs: list[str] = field(default_factory=list)
+
+    def polydata(self):
+        """The surface as a ``pyvista.PolyData``."""
+        import pyvista as pv
+
+        return pv.PolyData.from_regular_faces(self.points, self.triangles)
+
+    @property
+    def volume(self) -> float:
+        """Enclosed volume by the divergence theorem, V = Σ x0 · (x1 × x2) / 6 [units³]."""
+        v = self.points[self.triangles]
+        return float(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum() / 6.0)
+
+    @property
+    def area(self) -> float:
+        v = self.points[self.triangles]
+        return float(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum())
+
+    def scaled(self, factor: float) -> "Surface":
+        return Surface(self.points * factor, self.triangles, self.source, list(self.repairs))
+
+
+def file_digest(path: Path) -> str:
+    """SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _read_any(path: Path):
+    """Read ``path`` into a PolyData of its outer faces, or raise UserError."""
+    import logging
+    import warnings
+
+    import pyvista as pv
+
+    try:
+        with pv.vtk_verbosity("off"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            logging.disable(logging.CRITICAL)  # VTK reader errors are reported below, in one line
+            try:
+                mesh = pv.read(path)
+            finally:
+                logging.disable(logging.NOTSET)
+    except Exception as exc:  # VTK readers raise many types; fall back to meshio once
+        try:
+            import meshio
+
+            m = meshio.read(path)
+            cells = [c for c in m.cells if c.type in ("triangle", "quad", "polygon")]
+            if not cells:
+                raise UserError(f"surface file {path} holds no triangles or polygons") from None
+            faces = np.hstack([np.column_stack([np.full(len(c.data), c.data.shape[1]), c.data]).ravel()
+                               for c in cells])
+            mesh = pv.PolyData(np.asarray(m.points, float)[:, :3], faces)
+        except UserError:
+            raise
+        except Exception:
+            raise UserError(f"cannot read surface file {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+                            f" (readable formats: {', '.join(SUFFIXES)})") from None
+    if isinstance(mesh, pv.MultiBlock):
+        mesh = mesh.combine()
+    if not isinstance(mesh, pv.PolyData):
+        mesh = mesh.extract_surface(algorithm=None)
+    return mesh
+
+
+def read_surface(path: str | Path) -> Surface:
+    """Read, clean and check a closed surface file; raise :class:`UserError` if unusable."""
+    path = Path(path)
+    require(path.is_file(), f"surface file {path} does not exist")
+    require(path.stat().st_size > 0, f"surface file {path} is empty")
+    require(path.suffix.lower() in SUFFIXES,
+            f"surface file {path} has an unknown format '{path.suffix}' (use one of {', '.join(SUFFIXES)})")
+    mesh = _read_any(path)
+    require(mesh.n_points > 0 and mesh.n_cells > 0,
+            f"cannot read surface file {path}: no triangles in it (is it a valid {path.suffix.lstrip('.').upper()} file?)")
+    require(np.isfinite(mesh.points).all(), f"surface file {path} has non-finite point coordinates")
+    return prepare(mesh, str(path))
+
+
+def prepare(mesh, source: str) -> Surface:
+    """Triangulate, clean, check closed/manifold/single shell and orient outwards."""
+    repairs: list[str] = []
+    if not mesh.is_all_triangles:
+        mesh = mesh.triangulate()
+        repairs.append("split polygons into triangles")
+    n_points, n_cells = mesh.n_points, mesh.n_cells
+    mesh = mesh.clean(tolerance=1e-9, absolute=False)
+    if mesh.n_points < n_points:
+        repairs.append(f"merged {n_points - mesh.n_points} duplicate points")
+    tri = mesh.regular_faces if mesh.n_cells else np.empty((0, 3), int)
+    pts = np.asarray(mesh.points, dtype=np.float64)
+    tri, dropped = _drop_degenerate_and_duplicate(pts, tri)
+    if dropped:
+        repairs.append(f"removed {dropped} degenerate or duplicate triangles")
+    require(len(tri) >= 4, f"{source}: fewer than 4 valid triangles; not a closed surface")
+    _check_closed_manifold(tri, source)
+    shells = _count_shells(tri, len(pts))
+    require(shells == 1, f"{source}: the surface has {shells} separate shells; give one closed outer "
+                         "surface of the bone (remove loose fragments or inner surfaces first)")
+    used = np.unique(tri)
+    if len(used) < len(pts):
+        remap = np.full(len(pts), -1)
+        remap[used] = np.arange(len(used))
+        pts, tri = pts[used], remap[tri]
+    tri, flipped = _orient_consistently(tri)
+    if flipped:
+        repairs.append(f"made the orientation of {flipped} triangles consistent")
+    surf = Surface(pts, tri, source, repairs)
+    if surf.volume < 0:
+        surf.triangles = surf.triangles[:, ::-1].copy()
+        repairs.append("turned inward-facing triangles outwards")
+    return surf
+
+
+def _drop_degenerate_and_duplicate(pts, tri):
+    v = pts[tri]
+    area2 = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    scale = np.ptp(pts, axis=0).max() if len(pts) else 1.0
+    ok = (area2 > 1e-14 * scale ** 2) & (tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])
+    tri = tri[ok]
+    _, first = np.unique(np.sort(tri, axis=1), axis=0, return_index=True)
+    keep = np.sort(first)
+    return tri[keep], int((~ok).sum() + (len(tri) - len(keep)))
+
+
+def _edges(tri):
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    return np.sort(e, axis=1)
+
+
+def _check_closed_manifold(tri, source):
+    _, counts = np.unique(_edges(tri), axis=0, return_counts=True)
+    open_edges, over = int((counts == 1).sum()), int((counts > 2).sum())
+    require(open_edges == 0, f"{source}: the surface is not closed ({open_edges} boundary edges); "
+                             "close its holes in a mesh editor first")
+    require(over == 0, f"{source}: the surface is not manifold ({over} edges shared by more than two "
+                       "triangles); repair it in a mesh editor first")
+
+
+def _count_shells(tri, n_points):
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = _edges(tri)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_points, n_points))
+    used = np.unique(tri)
+    _, labels = connected_components(graph, directed=False)
+    return len(np.unique(labels[used]))
+
+
+def _orient_consistently(tri):
+    """Flip triangles so that every shared edge is traversed in opposite directions.
+
+    Breadth-first over the triangle adjacency graph, starting from triangle 0; returns the
+    triangles and the number flipped.
+    """
+    from collections import deque
+
+    n = len(tri)
+    directed = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    owner = np.tile(np.arange(n), 3)
+    key = np.sort(directed, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    pairs = order.reshape(-1, 2)  # closed manifold: every edge exactly twice
+    a, b = owner[pairs[:, 0]], owner[pairs[:, 1]]
+    same = (directed[pairs[:, 0]] == directed[pairs[:, 1]]).all(axis=1)  # same direction: inconsistent
+    if not same.any():
+        return tri, 0
+    neighbours = [[] for _ in range(n)]
+    for i, j, s in zip(a, b, same):
+        neighbours[i].append((j, s))
+        neighbours[j].append((i, s))
+    flip = np.zeros(n, bool)
+    seen = np.zeros(n, bool)
+    seen[0] = True
+    queue = deque([0])
+    while queue:
+        i = queue.popleft()
+        for j, s in neighbours[i]:
+            if not seen[j]:
+                flip[j] = flip[i] ^ s
+                seen[j] = True
+                queue.append(j)
+    out = tri.copy()
+    out[flip] = out[flip][:, ::-1]
+    return out, int(flip.sum())
+
+
+def simplify(surf: Surface, edge_mm: float) -> Surface:
+    """Decimate to triangles of about ``edge_mm`` (quadric error, volume kept); never refines.
+
+    The triangle count is area / (√3/4 · edge²); TetWild's time grows with it.
+    """
+    target = int(surf.area / (np.sqrt(3) / 4 * edge_mm ** 2))
+    if target >= 0.8 * len(surf.triangles):
+        return surf
+    poly = surf.polydata().decimate(1.0 - target / len(surf.triangles), volume_preservation=True)
+    out = prepare(poly, surf.source)
+    return Surface(out.points, out.triangles, surf.source,
+                   surf.repairs + [f"simplified {len(surf.triangles)} -> {len(out.triangles)} triangles "
+                                   f"(~{edge_mm:g} mm edges; volume {100 * (out.volume / surf.volume - 1):+.2f} %)"])
+
