@@ -200,6 +200,22 @@ def test_cached_rebuild_skips_tetwild(builtin, cache_dir, monkeypatch):
     assert again.stats["load_or_build_seconds"] < 0.2 * first.stats["tetwild_seconds"]
 
 
+def test_another_drill_site_reuses_the_tetwild_stage(builtin, cache_dir, monkeypatch):
+    """Site refinement runs on the cached TetWild mesh: a new site costs no TetWild run."""
+    _, first = builtin
+
+    def no_tetwild(*args, **kwargs):
+        raise AssertionError("TetWild ran although only the drill site changed")
+
+    monkeypatch.setattr(tetra, "tetrahedralize", no_tetwild)
+    monkeypatch.setenv("FEMSTUDY_CACHE", str(cache_dir))
+    other = parse_case(CASE.replace("position = 0.5", "position = 0.3").replace('"anterior"', '"lateral"'))
+    moved = build_femur_model(other, mesh_size_mm=SIZE_MM)
+    assert not moved.stats["cache_hit"] and moved.stats["cache_key"] != first.stats["cache_key"]
+    assert np.linalg.norm(moved.site.entry_point - first.site.entry_point) > 50
+    assert moved.stats["site_facets_in_drill_disk"] >= 8
+
+
 def test_corrupted_cache_entry_is_reported_and_rebuilt(builtin, cache_dir, tmp_path, monkeypatch, capfd):
     case, first = builtin
     private = tmp_path / "cache"

@@ -86,7 +86,8 @@ def test_mirrored_femur_is_right(femur):
 
 
 def test_case_overrides_win(femur):
-    f = _frame(femur, units="cm", proximal_end="-", long_axis=(0, 0, 1), anterior=(0, -1, 0), side="right")
+    in_cm = type(femur)(femur.points / 10, femur.triangles, "cm")
+    f = _frame(in_cm, units="cm", proximal_end="-", long_axis=(0, 0, 1), anterior=(0, -1, 0), side="right")
     assert f.units == "cm" and f.scale_to_mm == 10
     assert f.up @ [0, 0, -1] > 0.999 and f.anterior @ [0, -1, 0] > 0.999 and f.side == "right"
     assert set(f.overridden) == {"units", "proximal_end", "long_axis", "anterior", "side"}
@@ -102,6 +103,22 @@ def test_tlem2_in_metres_and_rotated():
     f = _frame(type(surf)(surf.points @ R.T / 1000, surf.triangles, "m"))
     assert (f.units, f.side) == ("m", "right")
     assert (R.T @ f.up) @ [0, 1, 0] > 0.99 and (R.T @ f.anterior) @ [1, 0, 0] > 0.95
+
+
+def test_stated_units_that_make_no_femur_are_refused(femur):
+    in_metres = type(femur)(femur.points / 1000, femur.triangles, "m")
+    with pytest.raises(UserError, match=r'units = "mm" the bone is 0.45\d+ mm long.*looks like m'):
+        _frame(in_metres, units="mm")
+
+
+def test_a_bone_without_a_head_is_not_oriented_by_guesswork():
+    import pyvista as pv
+
+    from femstudy.meshing.surface import prepare
+
+    cylinder = prepare(pv.Cylinder(radius=14, height=450, resolution=24).triangulate().clean(), "cylinder")
+    with pytest.raises(UserError, match="cannot tell which end of the bone is proximal"):
+        _frame(cylinder)
 
 
 def test_unknown_units_are_a_user_error(femur):
@@ -200,3 +217,20 @@ def test_pinched_boundary_is_filled():
     _, edge_counts = np.unique(np.sort(np.concatenate([b[:, [0, 1]], b[:, [1, 2]], b[:, [0, 2]]]), axis=1),
                                axis=0, return_counts=True)
     assert (edge_counts == 2).all()
+
+
+def test_self_intersections_are_found_and_refused():
+    import pyvista as pv
+
+    from femstudy.meshing.intersections import self_intersections
+    from femstudy.meshing.surface import prepare
+
+    sphere = pv.Sphere(radius=20, theta_resolution=20, phi_resolution=20).triangulate().clean()
+    points = np.asarray(sphere.points, float)
+    assert len(self_intersections(points, sphere.regular_faces)) == 0
+    pushed = points.copy()
+    cap = pushed[:, 2] > 15
+    pushed[cap, 2] = -pushed[cap, 2] - 12  # the north cap pokes out through the south pole
+    assert len(self_intersections(pushed, sphere.regular_faces)) > 0
+    with pytest.raises(UserError, match="the surface intersects itself"):
+        prepare(pv.PolyData.from_regular_faces(pushed, sphere.regular_faces), "pushed")

@@ -23,7 +23,7 @@ import numpy as np
 from femstudy import __version__, atomic
 from femstudy.console import Console
 
-LAYOUT = 1
+LAYOUT = 2
 
 
 def cache_root() -> Path:

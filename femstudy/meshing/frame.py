@@ -27,6 +27,9 @@ from femstudy.errors import UserError, require
 
 UNIT_SCALE = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: Plausible femur lengths in each unit (an adult femur is 250-700 mm).
+#: Smallest offset of the head's end from the shaft line, as a fraction of the length (a real
+#: femur: 35-50 mm on 400-480 mm, about 0.1).
+HEAD_OFFSET_MIN = 0.04
 UNIT_RANGES = {"m": (0.2, 0.75), "in": (8.0, 24.0), "cm": (24.5, 75.0), "mm": (200.0, 750.0)}
 
 
@@ -86,6 +89,13 @@ class Frame:
 def detect_units(extent: float, requested: str) -> tuple[str, float, list[str]]:
     """Unit name and scale to mm for a femur whose raw length is ``extent``."""
     if requested != "auto":
+        length_mm = extent * UNIT_SCALE[requested]
+        lo, hi = UNIT_RANGES["mm"]
+        if not lo <= length_mm <= hi:
+            likely = [u for u, (a, b) in UNIT_RANGES.items() if a <= extent <= b]
+            hint = f"; it looks like {likely[0]}: set geometry.units = \"{likely[0]}\" or \"auto\"" if likely else ""
+            raise UserError(f"with geometry.units = \"{requested}\" the bone is {length_mm:.4g} mm long, not a femur "
+                            f"(expected {lo:g}-{hi:g} mm){hint}")
         return requested, UNIT_SCALE[requested], ["units"]
     for unit, (lo, hi) in UNIT_RANGES.items():
         if lo <= extent <= hi:
@@ -108,14 +118,26 @@ def principal_axes(points: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray,
     return c, v[:, ::-1].T
 
 
+def _area_samples(points: np.ndarray, triangles: np.ndarray, per_extent: int = 80):
+    """Centres and areas of the surface's triangles after subdividing any triangle longer
+    than 1/``per_extent`` of the bone, so that every slice along the bone holds samples
+    even on a coarse triangulation (a CAD export with long slivers, say)."""
+    import pyvista as pv
+
+    extent = float(np.ptp(points, axis=0).max())
+    v = points[triangles]
+    if np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2).max() > extent / per_extent:
+        fine = pv.PolyData.from_regular_faces(points, triangles).subdivide_adaptive(max_edge_len=extent / per_extent)
+        v = np.asarray(fine.points, float)[fine.regular_faces]
+    return v.mean(axis=1), 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+
 def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Frame, np.ndarray]:
     """Detect the frame of a raw surface; returns the frame and the points converted to mm.
 
     ``geometry`` is the case's :class:`~femstudy.casefile.GeometrySpec`.
     """
-    v = points[triangles]
-    centres = v.mean(axis=1)
-    areas = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    centres, areas = _area_samples(points, triangles)
     _, axes = principal_axes(centres, areas)
     overridden: list[str] = []
     axis = axes[0]
@@ -160,10 +182,12 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
     else:
         sign = 1.0 if off_plus > off_minus else -1.0
     up = sign * axis
-    if geometry.long_axis == "auto" and geometry.proximal_end == "auto" and \
-            max(off_plus, off_minus) < 1.3 * min(off_plus, off_minus):
-        raise UserError("cannot tell which end of the bone is proximal (the head's offset from the shaft "
-                        "is not distinct); set geometry.proximal_end in the case file")
+    # the femoral head sits 35-50 mm off the shaft line; demand a clear, one-sided offset
+    if geometry.proximal_end == "auto" and (max(off_plus, off_minus) < HEAD_OFFSET_MIN * length
+                                            or max(off_plus, off_minus) < 1.3 * min(off_plus, off_minus)):
+        raise UserError(f"cannot tell which end of the bone is proximal: neither end is offset from the shaft "
+                        f"like a femoral head (end offsets {off_plus:.1f} and {off_minus:.1f} mm); "
+                        "set geometry.proximal_end (and check that the surface is a femur)")
     s = (hi - h) / length if sign > 0 else (h - lo) / length
     head_dir = off_shaft(end_plus if sign > 0 else end_minus)
     # medial-lateral: widest direction of the distal 15 %, signed towards the head

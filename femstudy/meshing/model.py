@@ -51,14 +51,15 @@ def _surface_file(case) -> Path:
     return BUILTIN_STL
 
 
-def mesh_parameters(case, size_mm: float) -> dict:
-    """Every case value that changes the tet mesh (the cache key's parameters)."""
+def mesh_parameters(case, size_mm: float, with_site: bool = True) -> dict:
+    """Every case value that changes the tet mesh (the cache key's parameters); without the
+    site refinement's values when ``with_site`` is false (the TetWild stage's key)."""
     g = case.geometry.model_dump(mode="json")
     g.pop("surface")
     m = case.mesh
-    params = {"geometry": g, "size_mm": size_mm, "refine": m.refine, "envelope": m.envelope}
-    if m.refine == "site":
-        params.update(site_size_mm=m.site_size_mm, site_radius_mm=m.site_radius_mm,
+    params = {"geometry": g, "size_mm": size_mm, "envelope": m.envelope}
+    if with_site and m.refine == "site":
+        params.update(refine="site", site_size_mm=m.site_size_mm, site_radius_mm=m.site_radius_mm,
                       site_position=case.site.position, site_direction=case.site.direction)
     return params
 
@@ -82,8 +83,18 @@ def build_femur_model(case, console: Console | None = None, mesh_size_mm: float 
     start = time.perf_counter()
     hit = cache.load(key)
     if hit is None:
-        console.progress(f"meshing {path.name} at {size:g} mm (not cached)")
-        arrays, meta = _build(case, path, size, console)
+        # two stages, cached apart: the TetWild mesh (shared by every drill site) and its
+        # refinement around this case's site
+        base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(case, size, with_site=False)})
+        base = cache.load(base_key) if base_key != key else None
+        if base is None:
+            console.progress(f"meshing {path.name} at {size:g} mm (not cached)")
+            base = _build(case, path, size, console)
+            if base_key != key:
+                cache.store(base_key, *base)
+        else:
+            console.progress(f"loaded the cached TetWild mesh {base_key[:12]}; refining it at the drill site")
+        arrays, meta = _finish(case, size, *base, console)
         cache.store(key, arrays, meta)
     else:
         console.progress(f"loaded cached mesh {key[:12]} ({cache.cache_root()})")
@@ -116,7 +127,6 @@ def _landmark_stats(mesh, outer, site, clamps) -> dict:
 def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]:
     from femstudy.meshing import regions, surface, tetra
     from femstudy.meshing.frame import build_frame
-    from femstudy.meshing.tetra import signed_volumes
 
     raw = surface.read_surface(path)
     frame, _ = build_frame(raw.points, raw.triangles, case.geometry)
@@ -144,20 +154,7 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     region = tetra.classify(points, tets, fields, frame, (case.geometry.canal.proximal_fraction,
                                                           case.geometry.canal.distal_fraction))
     mesh = tetra.compact(points, tets, region)
-    if case.mesh.refine == "site":
-        mesh = _refine_site(mesh, frame, case, size)
-        console.progress(f"refined the drill site to {min(case.mesh.site_size_mm, size):g} mm: {mesh.n_tets} tets")
-    quality = tetra.quality(mesh)
-    vol = signed_volumes(mesh.points, mesh.tets)
-    per_region = {REGION_NAMES[r]: {"tets": int((mesh.region == r).sum()), "volume_mm3": float(vol[mesh.region == r].sum())}
-                  for r in REGION_NAMES}
-    missing = [name for name, v in per_region.items() if v["tets"] == 0]
-    if missing:
-        raise UserError(f"the mesh has no {' or '.join(missing)} tets at {size:g} mm; use a smaller "
-                        "mesh.size_mm or check geometry.cortex and geometry.canal")
     stats = {
-        "n_points": mesh.n_points, "n_tets": mesh.n_tets, "regions": per_region,
-        "tet_volume_mm3": float(vol.sum()),
         "surface_volume_mm3": surf_mm.volume, "simplified_surface_volume_mm3": outer.volume,
         "canal_volume_mm3": float(canal_closed.volume),
         "canal_midshaft_diameter_mm": _midshaft_canal_diameter(fields, frame),
@@ -168,7 +165,31 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     }
     arrays = {"points": mesh.points, "tets": mesh.tets.astype(np.int32), "region": mesh.region,
               "canal_axis": fields.canal_axis}
-    return arrays, {"frame": frame.as_dict(), "quality": quality, "stats": stats}
+    return arrays, {"frame": frame.as_dict(), "stats": stats}
+
+
+def _finish(case, size: float, arrays: dict, meta: dict, console: Console) -> tuple[dict, dict]:
+    """The TetWild stage's mesh refined at the drill site (if asked), its quality and statistics."""
+    from femstudy.meshing import tetra
+    from femstudy.meshing.tetra import signed_volumes
+
+    mesh = TetMesh(arrays["points"], arrays["tets"].astype(np.int64), arrays["region"].astype(np.int8))
+    frame = Frame.from_dict(meta["frame"])
+    if case.mesh.refine == "site":
+        mesh = _refine_site(mesh, frame, case, size)
+        console.progress(f"refined the drill site to {min(case.mesh.site_size_mm, size):g} mm: {mesh.n_tets} tets")
+    vol = signed_volumes(mesh.points, mesh.tets)
+    per_region = {REGION_NAMES[r]: {"tets": int((mesh.region == r).sum()), "volume_mm3": float(vol[mesh.region == r].sum())}
+                  for r in REGION_NAMES}
+    missing = [name for name, v in per_region.items() if v["tets"] == 0]
+    if missing:
+        raise UserError(f"the mesh has no {' or '.join(missing)} tets at {size:g} mm; use a smaller "
+                        "mesh.size_mm or check geometry.cortex and geometry.canal")
+    stats = {"n_points": mesh.n_points, "n_tets": mesh.n_tets, "regions": per_region,
+             "tet_volume_mm3": float(vol.sum()), **meta["stats"]}
+    arrays = {"points": mesh.points, "tets": mesh.tets.astype(np.int32), "region": mesh.region,
+              "canal_axis": arrays["canal_axis"]}
+    return arrays, {"frame": meta["frame"], "quality": tetra.quality(mesh), "stats": stats}
 
 
 def _refine_site(mesh: TetMesh, frame: Frame, case, size: float) -> TetMesh:
@@ -188,6 +209,8 @@ def _simplified(poly, edge_mm: float):
     """Decimate a level-set surface to triangles of about ``edge_mm``."""
     if poly.n_cells == 0:
         return poly
+    if not poly.is_all_triangles:
+        poly = poly.triangulate()
     target = poly.area / (np.sqrt(3) / 4 * edge_mm ** 2)
     if target < 0.8 * poly.n_cells:
         poly = poly.decimate(1.0 - max(target, 50) / poly.n_cells, volume_preservation=True)

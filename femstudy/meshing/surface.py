@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from femstudy.errors import UserError, require
+from femstudy.meshing.intersections import self_intersections
 
 SUFFIXES = (".stl", ".obj", ".ply", ".vtp", ".vtk", ".vtu", ".off")
 
@@ -109,6 +110,9 @@ def read_surface(path: str | Path) -> Surface:
     require(mesh.n_points > 0 and mesh.n_cells > 0,
             f"cannot read surface file {path}: no triangles in it (is it a valid {path.suffix.lstrip('.').upper()} file?)")
     require(np.isfinite(mesh.points).all(), f"surface file {path} has non-finite point coordinates")
+    extent = np.ptp(np.asarray(mesh.points, float), axis=0)
+    require(extent.min() > 1e-6 * extent.max(),
+            f"surface file {path} is a flat (2-D) mesh; give the closed outer surface of the bone")
     return prepare(mesh, str(path))
 
 
@@ -140,6 +144,11 @@ def prepare(mesh, source: str) -> Surface:
     tri, flipped = _orient_consistently(tri)
     if flipped:
         repairs.append(f"made the orientation of {flipped} triangles consistent")
+    crossing = self_intersections(pts, tri)
+    if len(crossing):
+        where = ", ".join(f"{x:.4g}" for x in pts[tri[crossing[0, 0]]].mean(axis=0))
+        raise UserError(f"{source}: the surface intersects itself ({len(crossing)} pairs of triangles cross, "
+                        f"the first near ({where}) in the file's units); repair it in a mesh editor first")
     surf = Surface(pts, tri, source, repairs)
     if surf.volume < 0:
         surf.triangles = surf.triangles[:, ::-1].copy()
