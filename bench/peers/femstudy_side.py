@@ -107,6 +107,8 @@ def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
 
 def build_peer_case(fe, model: Model) -> PeerCase:
     """Assemble ``model`` with femstudy and export the discrete problem for the peers."""
+    if model.materials.cortical_model != "isotropic":
+        raise ValueError("the peers are given isotropic materials only; benchmark the isotropic cortex")
     system, patch, bc = setup(fe, model)
     fixed_nodes = np.unique(np.asarray(bc.fixed) // 3)
     if len(bc.fixed) != 3 * len(fixed_nodes):
