@@ -86,22 +86,26 @@ def setup(fe, model: Model):
 
 
 def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
-    """``static``: u (3n,) [mm] under F·thrust + T·torque. ``transient``: per-step drill-point and
-    maximum deflection [mm] and the final field, from femstudy's Newmark march."""
+    """``static``: u (3n,) [mm] under F·thrust + T·torque. ``transient``: per-step drill-point
+    deflection, maximum deflection over all nodes and over the surface nodes (those CalculiX
+    writes; the largest deflection can lie just inside) [mm], and the final field."""
     if system is None:
         system, patch, bc = setup(fe, model)
     if analysis == "static":
         force = model.static_thrust_N * patch.thrust + model.static_torque_Nmm * patch.torque
         return fe.solve_static(system, bc, force)
-    drill = drill_node(system.nodes, model.site)
+    drill, surface = drill_node(system.nodes, model.site), surface_nodes(system.cells)
 
     def observe(step, t, u):
-        return {"drill_point_mm": float(np.linalg.norm(u[3 * drill:3 * drill + 3]))}
+        nodal = u.reshape(-1, 3)
+        return {"drill_point_mm": float(np.linalg.norm(nodal[drill])),
+                "surface_max_deflection_mm": float(np.linalg.norm(nodal[surface], axis=1).max())}
 
     result = fe.solve_transient(system, bc, patch.patterns, np.column_stack([model.thrust_N, model.torque_Nmm]),
                                 model.times_s, keep=(-1,), observe=observe)
     return {"times_s": np.asarray(result.time_s), "drill_point_mm": result.summary["drill_point_mm"],
             "max_deflection_mm": result.summary["max_deflection_mm"],
+            "surface_max_deflection_mm": result.summary["surface_max_deflection_mm"],
             "u_final": result.fields[len(model.times_s) - 1]}
 
 
