@@ -2,8 +2,8 @@
 
     python bench/peers/femstudy_run.py MODEL.npz OUT.npz --analysis static|transient|export [--fe femstudy|standin]
 
-``static`` writes ``u`` (3n,) [mm]; ``transient`` the per-step drill-point and maximum
-deflections and the final field; ``export`` the assembled discrete problem as a peer case
+``static`` writes ``u`` (3n,) [mm]; ``transient`` what :func:`femstudy_side.solve` returns
+(per-step deflection histories [mm] and the final field); ``export`` the assembled discrete problem as a peer case
 (bench/peers/case.py) for CalculiX and DOLFINx. Phase times [s]: ``t_setup`` (assembly, patch,
 clamps) and ``t_solve``.
 """
