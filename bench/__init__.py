@@ -1,0 +1,1 @@
+"""Benchmarks and heavy measurements (not part of the installed package)."""

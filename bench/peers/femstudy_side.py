@@ -1,0 +1,148 @@
+"""femstudy's side of the peer benchmark: the model inputs, and the solver that runs on them.
+
+A *model* file (``model.npz``) holds what femstudy starts from — the region-marked linear tet
+mesh, the clamp masks, the drill site, the materials and the load history. From it
+:func:`build_peer_case` runs femstudy's assembly, drill patch and clamps and exports the
+resulting discrete problem (:class:`PeerCase`) for CalculiX and DOLFINx; ``femstudy_run.py``
+times femstudy solving the same model in its own process.
+
+The FE module is chosen by name: ``"femstudy"`` is :mod:`femstudy.fe`, ``"standin"`` the
+scikit-fem stand-in :mod:`bench.peers.standin` with the same interface. Only this file
+touches the solver's objects, and only these names: ``assemble``, ``drill_patch``, ``clamp``,
+``solve_static``, ``solve_transient(system, bc, patterns, amplitudes, times_s, keep=,
+observe=)``; ``system.nodes/cells/region``, ``patch.thrust/torque/patterns``, ``bc.fixed``,
+``result.time_s/summary["max_deflection_mm"]/fields``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from bench.peers.case import PeerCase
+from femstudy.atomic import atomic_path
+from femstudy.casefile import MaterialsSpec
+from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, Clamps, DrillSite, TetMesh
+
+FE_MODULES = {"femstudy": "femstudy.fe", "standin": "bench.peers.standin"}
+PATCH_RADIUS_MM = 1.35
+
+
+@dataclass
+class Model:
+    """femstudy's inputs for one benchmark mesh (units mm, N, N·mm, s)."""
+
+    mesh: TetMesh
+    clamps: Clamps
+    site: DrillSite
+    materials: MaterialsSpec
+    times_s: np.ndarray
+    thrust_N: np.ndarray
+    torque_Nmm: np.ndarray
+    static_thrust_N: float
+    static_torque_Nmm: float
+    patch_radius_mm: float = PATCH_RADIUS_MM
+
+    def save(self, path: str | os.PathLike) -> None:
+        s = self.site
+        with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, points=self.mesh.points, tets=self.mesh.tets, region=self.mesh.region,
+                     proximal=self.clamps.proximal, distal=self.clamps.distal, site_name=s.name,
+                     entry_point=s.entry_point, outward_normal=s.outward_normal, direction=s.direction,
+                     cortical_thickness_mm=s.cortical_thickness_mm,
+                     materials_json=self.materials.model_dump_json(), times_s=self.times_s,
+                     thrust_N=self.thrust_N, torque_Nmm=self.torque_Nmm,
+                     static_thrust_N=self.static_thrust_N, static_torque_Nmm=self.static_torque_Nmm,
+                     patch_radius_mm=self.patch_radius_mm)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Model":
+        with np.load(path) as d:
+            return cls(mesh=TetMesh(d["points"], d["tets"], d["region"]),
+                       clamps=Clamps(d["proximal"], d["distal"]),
+                       site=DrillSite(str(d["site_name"]), d["entry_point"], d["outward_normal"],
+                                      d["direction"], float(d["cortical_thickness_mm"])),
+                       materials=MaterialsSpec.model_validate_json(str(d["materials_json"])),
+                       times_s=d["times_s"], thrust_N=d["thrust_N"], torque_Nmm=d["torque_Nmm"],
+                       static_thrust_N=float(d["static_thrust_N"]),
+                       static_torque_Nmm=float(d["static_torque_Nmm"]),
+                       patch_radius_mm=float(d["patch_radius_mm"]))
+
+
+def fe_module(name: str):
+    """The FE module with assemble / drill_patch / clamp / solve_static / solve_transient."""
+    return importlib.import_module(FE_MODULES[name])
+
+
+def setup(fe, model: Model):
+    """femstudy's system, drill patch and constraints for ``model``."""
+    system = fe.assemble(model.mesh, model.materials, order=2)
+    patch = fe.drill_patch(system, model.site, radius_mm=model.patch_radius_mm)
+    bc = fe.clamp(system, model.clamps)
+    return system, patch, bc
+
+
+def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
+    """``static``: u (3n,) [mm] under F·thrust + T·torque. ``transient``: per-step drill-point
+    deflection, maximum deflection over all nodes and over the surface nodes (those CalculiX
+    writes; the largest deflection can lie just inside) [mm], and the final field."""
+    if system is None:
+        system, patch, bc = setup(fe, model)
+    if analysis == "static":
+        force = model.static_thrust_N * patch.thrust + model.static_torque_Nmm * patch.torque
+        return fe.solve_static(system, bc, force)
+    drill, surface = drill_node(system.nodes, model.site), surface_nodes(system.cells)
+
+    def observe(step, t, u):
+        nodal = u.reshape(-1, 3)
+        return {"drill_point_mm": float(np.linalg.norm(nodal[drill])),
+                "surface_max_deflection_mm": float(np.linalg.norm(nodal[surface], axis=1).max())}
+
+    result = fe.solve_transient(system, bc, patch.patterns, np.column_stack([model.thrust_N, model.torque_Nmm]),
+                                model.times_s, keep=(-1,), observe=observe)
+    return {"times_s": np.asarray(result.time_s), "drill_point_mm": result.summary["drill_point_mm"],
+            "max_deflection_mm": result.summary["max_deflection_mm"],
+            "surface_max_deflection_mm": result.summary["surface_max_deflection_mm"],
+            "u_final": result.fields[len(model.times_s) - 1]}
+
+
+def build_peer_case(fe, model: Model) -> PeerCase:
+    """Assemble ``model`` with femstudy and export the discrete problem for the peers."""
+    if model.materials.cortical_model != "isotropic":
+        raise ValueError("the peers are given isotropic materials only; benchmark the isotropic cortex")
+    system, patch, bc = setup(fe, model)
+    fixed_nodes = np.unique(np.asarray(bc.fixed) // 3)
+    if len(bc.fixed) != 3 * len(fixed_nodes):
+        raise ValueError("the clamps hold some nodes in only some directions; peers fix whole nodes")
+    codes = np.unique(system.region)
+    spec = {CORTICAL: model.materials.cortical, CANCELLOUS_PROXIMAL: model.materials.cancellous,
+            CANCELLOUS_DISTAL: model.materials.cancellous}
+    return PeerCase(nodes=np.asarray(system.nodes), elements=np.asarray(system.cells),
+                    region=np.asarray(system.region), material_codes=codes,
+                    youngs_modulus_MPa=np.array([spec[c].youngs_modulus_MPa for c in codes]),
+                    poissons_ratio=np.array([spec[c].poissons_ratio for c in codes]),
+                    density_t_mm3=np.array([spec[c].density_t_mm3 for c in codes]),
+                    fixed_nodes=fixed_nodes, thrust=np.asarray(patch.thrust), torque=np.asarray(patch.torque),
+                    static_thrust_N=model.static_thrust_N, static_torque_Nmm=model.static_torque_Nmm,
+                    times_s=np.asarray(model.times_s), thrust_N=np.asarray(model.thrust_N),
+                    torque_Nmm=np.asarray(model.torque_Nmm), drill_node=drill_node(system.nodes, model.site),
+                    watch_nodes=surface_nodes(system.cells))
+
+
+def drill_node(nodes: np.ndarray, site: DrillSite) -> int:
+    """The node nearest the drill entry point."""
+    return int(np.argmin(np.linalg.norm(nodes - site.entry_point, axis=1)))
+
+
+#: The faces of a P2 tet in scikit-fem's layout: three vertices, then the three edge nodes.
+P2_FACES = np.array([[0, 1, 2, 4, 5, 6], [0, 1, 3, 4, 7, 8], [0, 2, 3, 6, 7, 9], [1, 2, 3, 5, 8, 9]])
+
+
+def surface_nodes(cells: np.ndarray) -> np.ndarray:
+    """Nodes on the boundary: those of faces that belong to one element only."""
+    faces = cells[:, P2_FACES].reshape(-1, 6)
+    _, first, count = np.unique(np.sort(faces[:, :3], axis=1), axis=0, return_index=True, return_counts=True)
+    return np.unique(faces[first[count == 1]])

@@ -1,0 +1,1 @@
+"""Exports of a femstudy model to other finite-element programs."""
