@@ -27,10 +27,11 @@ def test_every_available_method_solves_the_system(problem, method):
     factor = linsolve.factorize(K, method, near_null=B)
     assert factor.method == method
     x = factor.solve(b)
-    # 1e-8: AMG-CG stops at relative residual 1e-10 and direct solvers reach ~1e-13
-    assert np.linalg.norm(K @ x - b) < 1e-8 * np.linalg.norm(b)
+    # direct solvers reach round-off (~1e-13 here); AMG-CG stops at a 1e-8 relative residual
+    # measured in its preconditioner's norm, so allow ten times that in the plain norm
+    assert np.linalg.norm(K @ x - b) < (1e-7 if method == "amg" else 1e-10) * np.linalg.norm(b)
     x0 = factor.solve(b[:, 0])
-    np.testing.assert_allclose(x0, x[:, 0], rtol=1e-6, atol=1e-12 * np.abs(x).max())
+    np.testing.assert_allclose(x0, x[:, 0], rtol=1e-5, atol=1e-9 * np.abs(x).max())
     assert factor.solves == 2 and method in factor.describe()
 
 
@@ -47,7 +48,7 @@ def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, capsys):
     factor = linsolve.factorize(K, near_null=B, console=Console())
     assert factor.method == "superlu"
     assert "linear solver superlu" in capsys.readouterr().err
-    assert np.linalg.norm(K @ factor.solve(b) - b) < 1e-8 * np.linalg.norm(b)
+    assert np.linalg.norm(K @ factor.solve(b) - b) < 1e-10 * np.linalg.norm(b)
     # large problems go to AMG-CG, whose memory grows linearly, rather than to SuperLU
     assert linsolve.choose(10 * linsolve.SUPERLU_MAX_DOFS) == ["amg", "superlu"]
     hide(monkeypatch, "pypardiso", "sksparse.cholmod", "pyamg")
@@ -61,6 +62,8 @@ def test_pardiso_that_does_not_fit_gives_way(problem, monkeypatch, capsys):
     factor = linsolve.factorize(K, near_null=B, console=Console())
     assert factor.method != "pardiso"
     assert "pardiso does not fit in memory" in capsys.readouterr().err
+    with pytest.raises(UserError, match="does not fit in memory"):
+        linsolve.factorize(K, "pardiso")
 
 
 def test_solver_choice_can_be_forced_and_is_checked(problem, monkeypatch):
