@@ -1,6 +1,8 @@
 """Assembly: the batched element integrals equal scikit-fem's own forms, and the matrices
 have the physics they must (rigid-body null space, total mass, region materials)."""
 
+import pickle
+
 import numpy as np
 import pytest
 import skfem
@@ -9,9 +11,9 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from femstudy.casefile import MaterialsSpec
 from femstudy.errors import UserError
-from femstudy.fe import assemble
+from femstudy.fe import assemble, fix_facets, solve_static
 from femstudy.fe.linsolve import rigid_body_modes
-from femstudy.fe.materials import (CORTICAL_TRANSVERSELY_ISOTROPIC, isotropic_stiffness)
+from femstudy.fe.materials import CORTICAL_TRANSVERSELY_ISOTROPIC, TransverselyIsotropic, isotropic_stiffness
 from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
 
 
@@ -91,6 +93,17 @@ def test_transverse_isotropy_values_are_consistent_with_the_thesis_tables():
     D = ti.stiffness()
     assert np.all(np.linalg.eigvalsh(D) > 0)
     # isotropic limit reproduces the isotropic matrix
-    from femstudy.fe.materials import TransverselyIsotropic
     iso = TransverselyIsotropic(16e3, 16e3, 0.4, 0.4, 16e3 / 2.8)
     np.testing.assert_allclose(iso.stiffness(), isotropic_stiffness(16e3, 0.4), rtol=1e-12)
+
+
+def test_system_pickles_without_its_factorisations():
+    system = assemble(two_region_bar())
+    facets = system.mesh.boundary_facets()
+    bc = fix_facets(system, facets[(system.mesh.p[0, system.mesh.facets[:, facets]] == 0).all(axis=0)])
+    f = np.zeros(system.n_dofs)
+    f[1::3] = 1.0
+    u = solve_static(system, bc, f)
+    copy = pickle.loads(pickle.dumps(system))
+    assert system.cache and not copy.cache
+    np.testing.assert_array_equal(solve_static(copy, bc, f), u)

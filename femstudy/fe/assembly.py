@@ -64,7 +64,8 @@ def reference(order: int) -> Reference:
 
 @dataclass
 class FESystem:
-    """An assembled elasticity model; build it with :func:`assemble`, reuse it for every load.
+    """An assembled elasticity model; build it with :func:`assemble`, reuse it for every load
+    (it pickles, without its cache, for reuse across runs).
 
     mesh         : scikit-fem MeshTet of the used vertices [mm]
     nodes        : (n_nodes, 3) node coordinates [mm] (vertices, then P2 edge mid-points)
@@ -100,6 +101,10 @@ class FESystem:
     @property
     def n_tets(self) -> int:
         return len(self.cells)
+
+    def __getstate__(self):
+        """Pickle without the cache (factorisations live in solver libraries' memory)."""
+        return {**self.__dict__, "cache": {}}
 
     def summary(self) -> str:
         t = self.timings
@@ -191,9 +196,9 @@ def assemble(mesh: TetMesh, materials=None, order: int = 2, long_axis=None, cons
         B, dV = strain_matrices(system, part)
         DB = mats.D[mats.index[part]][:, None] @ B * dV[..., None, None]
         n = len(part)
-        Ke = B.reshape(n, -1, 3 * nbf).transpose(0, 2, 1) @ DB.reshape(n, -1, 3 * nbf)
-        Ke = Ke.reshape(n, nbf, 3, nbf, 3).transpose(0, 1, 3, 2, 4)  # (element, a, b, 3×3 block)
-        target = (9 * position[part].astype(np.int64))[:, :, None] + np.arange(9)
+        Ke = B.reshape(n, -1, 3 * nbf).transpose(0, 2, 1) @ DB.reshape(n, -1, 3 * nbf)  # rows (a, c), cols (b, d)
+        pair = 9 * position[part].astype(np.int64).reshape(n, nbf, 1, nbf, 1)
+        target = pair + 3 * np.arange(3)[:, None, None] + np.arange(3)  # entry (c, d) of block (a, b)
         blocks += np.bincount(target.ravel(), Ke.ravel(), minlength=9 * nnzb)
     K = _block_matrix(blocks.reshape(nnzb, 3, 3), indptr, indices, n_nodes)
     del blocks
