@@ -1,0 +1,216 @@
+"""Stiffness and mass matrices of linear elasticity on a tetrahedral mesh (P1 or P2).
+
+K u = f with K = Σ_e ∫_e Bᵀ D B dV [N/mm] and the consistent mass M = Σ_e ∫_e ρ Nᵀ N dV
+[tonne], in mm, N, MPa, s, tonne/mm³. scikit-fem supplies the element (ElementTetP1/P2), its
+quadrature and the degree-of-freedom numbering; the element integrals are evaluated here as
+batched matrix products over all elements at once, which is several times faster than a
+generic per-entry :class:`skfem.BilinearForm` (docs/solver.md has the timings; the tests
+check both give the same matrices to round-off).
+
+DOF numbering is scikit-fem's for ``ElementVector``: node n (the mesh vertices, then for P2
+the edge mid-points in ``mesh.edges`` order) carries DOFs 3n, 3n+1, 3n+2 (x, y, z), so K and
+M are assembled as 3×3-block sparse matrices over the nodes' sparsity pattern.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import skfem
+from skfem.quadrature import get_quadrature
+
+from femstudy.errors import require
+from femstudy.fe.materials import ElementMaterials, element_materials
+from femstudy.femur_model import TetMesh
+
+#: Elements per batch: bounds the temporary arrays to a few hundred MB at any mesh size.
+CHUNK = 20_000
+
+
+@dataclass(frozen=True)
+class Reference:
+    """The reference element: shape functions at the quadrature points.
+
+    stiffness rule: exact for ∇N·∇N (degree 2(p−1)); mass rule: exact for N·N (degree 2p).
+    grad   : (nq, nbf, 3) ∂N_a/∂ξ at the stiffness points; weights (nq,) sum to 1/6
+    mass   : (nbf, nbf) ∫_ref N_a N_b dξ
+    """
+
+    order: int
+    element: skfem.Element
+    points: np.ndarray
+    weights: np.ndarray
+    grad: np.ndarray
+    mass: np.ndarray
+
+    @property
+    def nbf(self) -> int:
+        return self.grad.shape[1]
+
+
+def reference(order: int) -> Reference:
+    require(order in (1, 2), f"element order must be 1 or 2, got {order}")
+    element = skfem.ElementTetP2() if order == 2 else skfem.ElementTetP1()
+    nbf = 10 if order == 2 else 4
+    X, W = get_quadrature(element, max(2 * (order - 1), 1))
+    grad = np.stack([element.lbasis(X, a)[1] for a in range(nbf)]).transpose(2, 0, 1)
+    Xm, Wm = get_quadrature(element, 2 * order)
+    N = np.stack([element.lbasis(Xm, a)[0] for a in range(nbf)])
+    return Reference(order, element, X, W, grad, (N * Wm) @ N.T)
+
+
+@dataclass
+class FESystem:
+    """An assembled elasticity model; build it with :func:`assemble`, reuse it for every load
+    (it pickles, without its cache, for reuse across runs).
+
+    mesh         : scikit-fem MeshTet of the used vertices [mm]
+    nodes        : (n_nodes, 3) node coordinates [mm] (vertices, then P2 edge mid-points)
+    cells        : (n_tets, nbf) node indices of every element, scikit-fem's local order
+    region       : (n_tets,) region code per element
+    K, M         : (3 n_nodes)² CSR stiffness [N/mm] and consistent mass [tonne]
+    point_index  : for every point of the input TetMesh, its mesh vertex (−1 if unused)
+    timings      : wall times [s] of the assembly phases
+    cache        : factorisations and reduced matrices, keyed by constraint set
+    """
+
+    mesh: skfem.MeshTet
+    ref: Reference
+    dofs: skfem.assembly.Dofs
+    nodes: np.ndarray
+    cells: np.ndarray
+    region: np.ndarray
+    materials: ElementMaterials
+    K: sp.csr_matrix
+    M: sp.csr_matrix
+    point_index: np.ndarray
+    timings: dict = field(default_factory=dict)
+    cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def order(self) -> int:
+        return self.ref.order
+
+    @property
+    def n_dofs(self) -> int:
+        return 3 * len(self.nodes)
+
+    @property
+    def n_tets(self) -> int:
+        return len(self.cells)
+
+    def __getstate__(self):
+        """Pickle without the cache (factorisations live in solver libraries' memory)."""
+        return {**self.__dict__, "cache": {}}
+
+    def summary(self) -> str:
+        t = self.timings
+        return (f"P{self.order} mesh: {self.n_tets:,} tets, {len(self.nodes):,} nodes, {self.n_dofs:,} DOFs; "
+                f"K {t['stiffness_s']:.2f} s, M {t['mass_s']:.2f} s, pattern {t['pattern_s']:.2f} s")
+
+
+def jacobians(points: np.ndarray, tets: np.ndarray):
+    """Affine maps x = p0 + J ξ of the tets: (J⁻¹ (n, 3, 3), det J (n,))."""
+    p = points[tets]
+    J = (p[:, 1:] - p[:, :1]).transpose(0, 2, 1)
+    det = np.linalg.det(J)
+    require(np.all(np.abs(det) > 1e-12 * np.abs(J).max() ** 3),
+            f"the mesh has {np.sum(np.abs(det) <= 1e-12 * np.abs(J).max() ** 3)} degenerate (flat) tetrahedra")
+    return np.linalg.inv(J), det
+
+
+def strain_matrices(system: FESystem, cells: np.ndarray):
+    """B (n, nq, 6, 3 nbf) with ε = B u_e (Voigt, engineering shear) at the stiffness
+    quadrature points, and the integration weights dV (n, nq) [mm³], for elements ``cells``."""
+    ref = system.ref
+    invJ, det = jacobians(system.mesh.p.T, system.mesh.t.T[cells])
+    G = np.einsum("qak,ekj->eqaj", ref.grad, invJ)  # ∂N_a/∂x_j = Σ_k ∂N_a/∂ξ_k (J⁻¹)_kj
+    n, nq, nbf = G.shape[:3]
+    B = np.zeros((n, nq, 6, nbf, 3))
+    for c in range(3):
+        B[:, :, c, :, c] = G[..., c]
+    for row, (i, j) in zip((3, 4, 5), ((1, 2), (0, 2), (0, 1))):
+        B[:, :, row, :, i] = G[..., j]
+        B[:, :, row, :, j] = G[..., i]
+    return B.reshape(n, nq, 6, 3 * nbf), np.abs(det)[:, None] * ref.weights
+
+
+def _node_pattern(cells: np.ndarray, n_nodes: int):
+    """Node-level CSR pattern (indptr, indices) and, for every (element, a, b) entry, the
+    position of the pair (cells[e, a], cells[e, b]) in it."""
+    nbf = cells.shape[1]
+    rows = np.repeat(cells, nbf, axis=1).ravel()
+    cols = np.tile(cells, (1, nbf)).ravel()
+    pattern = sp.csr_matrix((np.ones(len(rows), np.float32), (rows, cols)), shape=(n_nodes, n_nodes))
+    pattern.sum_duplicates()
+    keys = np.repeat(np.arange(n_nodes, dtype=np.int64), np.diff(pattern.indptr)) * n_nodes + pattern.indices
+    position = np.searchsorted(keys, rows.astype(np.int64) * n_nodes + cols).astype(np.int32)
+    return pattern.indptr, pattern.indices, position.reshape(len(cells), nbf * nbf)
+
+
+def _block_matrix(blocks: np.ndarray, indptr, indices, n_nodes: int) -> sp.csr_matrix:
+    return sp.bsr_matrix((blocks, indices, indptr), shape=(3 * n_nodes, 3 * n_nodes)).tocsr()
+
+
+def assemble(mesh: TetMesh, materials=None, order: int = 2, long_axis=None, console=None) -> FESystem:
+    """Assemble K and M for a region-marked :class:`~femstudy.femur_model.TetMesh`.
+
+    materials : :class:`femstudy.casefile.MaterialsSpec` (default: thesis Table 3-1)
+    order     : 2 for quadratic (10-node) tetrahedra, 1 for linear ones
+    long_axis : the bone's long axis for a transversely isotropic cortex: a 3-vector, one
+                per tet, or None for the principal axis of the mesh points (largest spread)
+    """
+    from femstudy.casefile import MaterialsSpec
+
+    materials = MaterialsSpec() if materials is None else materials
+    t0 = time.perf_counter()
+    points, tets = np.asarray(mesh.points, float), np.asarray(mesh.tets)
+    require(points.ndim == 2 and points.shape[1] == 3 and tets.ndim == 2 and tets.shape[1] == 4 and len(tets),
+            "the mesh needs (n, 3) points and a non-empty (m, 4) array of tetrahedra")
+    used = np.unique(tets)
+    point_index = np.full(len(points), -1, dtype=np.int64)
+    point_index[used] = np.arange(len(used))
+    skmesh = skfem.MeshTet(np.ascontiguousarray(points[used].T), np.ascontiguousarray(point_index[tets].T))
+    ref = reference(order)
+    if long_axis is None and materials.cortical_model == "transversely_isotropic":
+        centred = skmesh.p.T - skmesh.p.mean(axis=1)
+        long_axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+    mats = element_materials(mesh.region, materials, long_axis)
+    scalar = skfem.assembly.Dofs(skmesh, ref.element)
+    cells = np.ascontiguousarray(scalar.element_dofs.T)
+    nodes = skmesh.p.T if order == 1 else np.concatenate([skmesh.p.T, skmesh.p.T[skmesh.edges].mean(axis=0)])
+    dofs = skfem.assembly.Dofs(skmesh, skfem.ElementVector(ref.element))
+    n_nodes = len(nodes)
+    t1 = time.perf_counter()
+    indptr, indices, position = _node_pattern(cells, n_nodes)
+    t2 = time.perf_counter()
+    system = FESystem(skmesh, ref, dofs, nodes, cells, np.asarray(mesh.region), mats, None, None, point_index)
+
+    nbf, nnzb = ref.nbf, len(indices)
+    blocks = np.zeros(9 * nnzb)
+    for start in range(0, len(cells), CHUNK):
+        part = np.arange(start, min(start + CHUNK, len(cells)))
+        B, dV = strain_matrices(system, part)
+        DB = mats.D[mats.index[part]][:, None] @ B * dV[..., None, None]
+        n = len(part)
+        Ke = B.reshape(n, -1, 3 * nbf).transpose(0, 2, 1) @ DB.reshape(n, -1, 3 * nbf)  # rows (a, c), cols (b, d)
+        pair = 9 * position[part].astype(np.int64).reshape(n, nbf, 1, nbf, 1)
+        target = pair + 3 * np.arange(3)[:, None, None] + np.arange(3)  # entry (c, d) of block (a, b)
+        blocks += np.bincount(target.ravel(), Ke.ravel(), minlength=9 * nnzb)
+    K = _block_matrix(blocks.reshape(nnzb, 3, 3), indptr, indices, n_nodes)
+    del blocks
+    t3 = time.perf_counter()
+    _, det = jacobians(skmesh.p.T, skmesh.t.T)
+    scale = mats.density * np.abs(det)
+    m = np.bincount(position.ravel(), (scale[:, None] * ref.mass.ravel()).ravel(), minlength=nnzb)
+    M = _block_matrix(m[:, None, None] * np.eye(3), indptr, indices, n_nodes)
+    t4 = time.perf_counter()
+    system.K, system.M = K, M
+    system.timings = {"setup_s": t1 - t0, "pattern_s": t2 - t1, "stiffness_s": t3 - t2, "mass_s": t4 - t3,
+                      "total_s": t4 - t0}
+    if console is not None:
+        console.progress(f"assembled {system.summary()}")
+    return system
