@@ -152,7 +152,9 @@ class DrillSpec(_Section):
 
 class DrillingSpec(_Section):
     """Operating point and load models. ``depth_mm = "cortex"`` drills the local cortex.
-    ``mu_f``/``mu_w`` replace the bone set's power law (e.g. to sweep friction)."""
+    ``mu_f``/``mu_w`` replace the bone set's power law (e.g. to sweep friction);
+    ``load_scale`` multiplies the thrust and torque of both loadings (sensitivity studies,
+    safety factors; 0 gives the unloaded bone)."""
 
     feed_mm_s: float = Field(2.0, gt=0, le=50)
     spindle_rpm: float = Field(1500.0, gt=0, le=100_000)
@@ -160,6 +162,7 @@ class DrillingSpec(_Section):
     mu_f: float | None = Field(None, gt=0, le=5)
     mu_w: float | None = Field(None, gt=0, le=10)
     depth_mm: Union[Literal["cortex"], Annotated[float, Field(gt=0, le=100)]] = 6.0
+    load_scale: float = Field(1.0, ge=0, le=100)
 
 
 class TimeSpec(_Section):
@@ -330,8 +333,24 @@ def with_overrides(case: Case, overrides: dict) -> Case:
     return updated.model_copy(update={"source": case.source})
 
 
+def check_references(case: Case) -> None:
+    """Fail now, before any work, if the surface file or the bone set does not exist."""
+    from femstudy.drilling.friction import load_bone_set
+
+    where = str(case.source) if case.source else "<case>"
+    surface = case.surface_path()
+    if surface is not None and not surface.is_file():
+        line = _key_line(case.source.read_text(encoding="utf-8"), ["geometry", "surface"]) if case.source else None
+        raise UserError(f"{where}{f':{line}' if line else ''}: geometry.surface: {surface} does not exist "
+                        f"(paths are relative to the case file's folder; use \"builtin\" for the built-in femur)")
+    try:
+        load_bone_set(case.drilling.bone)
+    except UserError as exc:
+        raise UserError(f"{where}: drilling.bone: {exc}") from None
+
+
 def load_case(path: str | Path) -> Case:
-    """Read and validate a case file."""
+    """Read and validate a case file, including the files and bone set it refers to."""
     path = Path(path)
     if not path.is_file():
         raise UserError(f"case file {path} does not exist")
@@ -339,4 +358,6 @@ def load_case(path: str | Path) -> Case:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"cannot read case file {path}: {exc}") from None
-    return parse_case(text, path)
+    case = parse_case(text, path)
+    check_references(case)
+    return case

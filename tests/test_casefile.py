@@ -35,6 +35,10 @@ def test_partial_material_keeps_table_3_1_values():
 def test_surface_path_is_relative_to_the_case_file(tmp_path):
     path = tmp_path / "c.toml"
     path.write_text("[geometry]\nsurface = 'bones/f.stl'\n")
+    with pytest.raises(UserError, match=r"c.toml:2: geometry.surface: .*bones/f.stl does not exist"):
+        load_case(path)
+    (tmp_path / "bones").mkdir()
+    (tmp_path / "bones" / "f.stl").write_text("solid x\nendsolid x\n")
     assert load_case(path).surface_path() == tmp_path / "bones" / "f.stl"
     assert parse_case("name='x'").surface_path() is None
 
