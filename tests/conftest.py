@@ -36,3 +36,9 @@ def bone_library(tmp_path, monkeypatch):
     folder.mkdir()
     monkeypatch.setenv("FEMSTUDY_BONES", str(folder))
     return folder
+
+
+@pytest.fixture(scope="session")
+def mesh_cache(tmp_path_factory):
+    """One mesh cache for the whole test session, so the built-in femur is meshed once."""
+    return tmp_path_factory.mktemp("mesh-cache")

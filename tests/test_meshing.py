@@ -27,8 +27,8 @@ direction = "anterior"
 
 
 @pytest.fixture(scope="session")
-def cache_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("mesh-cache")
+def cache_dir(mesh_cache):
+    return mesh_cache
 
 
 def _build(text, cache_dir, size=SIZE_MM):

@@ -9,7 +9,7 @@ Units: s, N, N·mm.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,4 +57,7 @@ def case_loading(case: Case, cortical_thickness_mm: float) -> CaseLoading:
     cond = DrillingConditions(case.drilling.feed_mm_s, case.drilling.spindle_rpm, depth, bone, drill, friction)
     times = time_grid(cond, case.time.step_s, end_s=case.time.end_s)
     thrust, torque = cond.static_allotta()
-    return CaseLoading(cond, depth, evaluate("clogging", cond, times), thrust, torque)
+    k = case.drilling.load_scale
+    dynamic = evaluate("clogging", cond, times)
+    dynamic = replace(dynamic, thrust_N=k * dynamic.thrust_N, torque_Nmm=k * dynamic.torque_Nmm)
+    return CaseLoading(cond, depth, dynamic, k * thrust, k * torque)

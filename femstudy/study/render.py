@@ -22,7 +22,14 @@ def nice_warp_factor(max_displacement_mm: float, length_mm: float, share: float 
 
 
 def start_offscreen():
-    """Import pyvista configured for off-screen rendering."""
+    """Import pyvista configured for off-screen rendering.
+
+    Without a display VTK first tries X, logs a warning and falls back to EGL/OSMesa;
+    only VTK's errors are let through to stderr.
+    """
+    from vtkmodules.vtkCommonCore import vtkLogger
+
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_ERROR)
     import pyvista as pv
 
     pv.OFF_SCREEN = True
@@ -30,30 +37,45 @@ def start_offscreen():
 
 
 def deformed_picture(path: Path, grid, site_point, site_direction, warp: float, title: str,
-                     scalars: str = "von_mises_MPa", scalar_title: str = "von Mises [MPa]", clim=None,
-                     window=(1400, 1000)) -> None:
+                     scalars: str = "von_mises_MPa", scalar_title: str = "von Mises [MPa]",
+                     cap_percentile: float = 99.0, window=(1000, 1300)) -> None:
     """Render ``grid`` (a pyvista UnstructuredGrid with point vector ``displacement_mm`` and
-    ``scalars``) warped by ``warp``, with an arrow marking the drill site; save a PNG."""
+    ``scalars``) warped by ``warp``, seen from the side so that the deflection along the drill
+    axis shows in profile, over the undeformed outline, with an arrow for the drill; save a PNG.
+
+    The colour scale is capped at the ``cap_percentile`` of the surface values, so that the
+    local peak under the load patch does not leave the rest of the bone one colour.
+    """
     pv = start_offscreen()
-    surface = grid.extract_surface(algorithm="dataset_surface").warp_by_vector("displacement_mm", factor=warp)
+    undeformed = grid.extract_surface(algorithm="dataset_surface")
+    surface = undeformed.warp_by_vector("displacement_mm", factor=warp)
+    values = np.asarray(surface.point_data[scalars], float)
+    clim = [float(values.min()), float(max(np.percentile(values, cap_percentile), values.min() + 1e-12))]
+    capped = clim[1] < values.max()
     site_point = np.asarray(site_point, float)
-    direction = np.asarray(site_direction, float)
-    length = float(np.ptp(grid.points, axis=0).max())
+    direction = np.asarray(site_direction, float) / np.linalg.norm(site_direction)
+    axis = np.asarray(grid.field_data["long_axis"]) if "long_axis" in grid.field_data else np.array([0, 0, 1.0])
+    length = float(np.ptp(grid.points @ axis))
     arrow = pv.Arrow(start=site_point - direction * 0.12 * length, direction=direction,
                      scale=0.11 * length, tip_length=0.3, tip_radius=0.12, shaft_radius=0.04)
     plotter = pv.Plotter(off_screen=True, window_size=list(window))
+    plotter.add_silhouette(undeformed, color="gray", line_width=1.5)
     plotter.add_mesh(surface, scalars=scalars, cmap="turbo", clim=clim, smooth_shading=True,
-                     scalar_bar_args={"title": scalar_title, "vertical": True, "fmt": "%.3g"})
+                     scalar_bar_args={"title": scalar_title, "vertical": True, "fmt": "%.3g",
+                                      "position_x": 0.8, "position_y": 0.25, "width": 0.08})
     plotter.add_mesh(arrow, color="black")
-    plotter.add_text(f"{title}\ndeformation x{warp:g} (warp factor)", font_size=11)
-    # look at the drill site from the side the drill comes from, long axis vertical on screen
-    centre = np.asarray(surface.center)
+    unit = scalar_title[scalar_title.find("[") + 1:scalar_title.find("]")] if "[" in scalar_title else ""
+    cap = (f"\ncolour scale capped at the {cap_percentile:g}th percentile; peak {values.max():.3g} {unit} "
+           "under the drill") if capped else ""
+    plotter.add_text(f"{title}\ndeformation x{warp:g} (warp factor); grey outline: undeformed; arrow: drill{cap}",
+                     font_size=11)
+    side = np.cross(axis, direction)
+    side = side / np.linalg.norm(side) if np.linalg.norm(side) > 1e-9 else np.array([1.0, 0, 0])
+    centre = np.asarray(undeformed.center)
     plotter.camera.focal_point = centre
-    plotter.camera.position = centre - direction * 2.2 * length
-    axis = np.asarray(grid.field_data["long_axis"]) if "long_axis" in grid.field_data else np.array([0, 0, 1.0])
+    plotter.camera.position = centre + side * 3 * length
     plotter.camera.up = axis
     plotter.reset_camera()
-    plotter.camera.zoom(1.15)
     image = plotter.screenshot(return_img=True)
     plotter.close()
     save_png(path, image)

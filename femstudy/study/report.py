@@ -5,8 +5,10 @@ from __future__ import annotations
 
 from femstudy.study.thesis import MAX_DEFLECTION_MM, MAX_VON_MISES_MPA
 
+#: Site names that correspond to the thesis's three rows (§3.3.3: mid-diaphysis, proximal end, distal end).
 THESIS_SITE = {"mid-diaphysis": "mid-diaphysis", "middiaphysis": "mid-diaphysis",
-               "proximal": "proximal", "distal": "distal"}
+               "proximal": "proximal", "subtrochanteric": "proximal",
+               "distal": "distal", "supracondylar": "distal"}
 
 
 def _fmt(value, digits: int = 4) -> str:
@@ -47,13 +49,18 @@ def run_report(summary: dict) -> str:
                      f"{_fmt(t[0] / t[1] if t else None, 3)} |")
     lines += ["", f"Peak loads: dynamic {load['peak_thrust_N']:.1f} N / {load['peak_torque_Nmm']:.1f} N·mm, "
                   f"static {load['static_thrust_N']:.1f} N / {load['static_torque_Nmm']:.1f} N·mm.", ""]
-    lines += ["**Margin to failure** (strength / peak von Mises, dynamic loading, whole region "
-              "including the patch):", "", "| region | peak von Mises [MPa] | strength [MPa] | safety factor |",
-              "|---|---|---|---|"]
+    lines += ["**Margin to failure** (strength / peak von Mises under the dynamic loading; the peak under "
+              "the patch is mesh-dependent, the one outside the exclusion zone is the converged measure):", "",
+              "| region | peak von Mises [MPa] | strength [MPa] | safety factor |", "|---|---|---|---|"]
     for region, m in summary["margins"]["dynamic"].items():
         kind = "yield" if "yield_MPa" in m else "ultimate"
         lines.append(f"| {region} | {_fmt(m['peak_von_mises_MPa'])} | {m[kind + '_MPa']:g} ({kind}) | "
                      f"{_fmt(m['safety_factor_' + kind], 3)} |")
+    outside = res["max_von_mises_excl_MPa"]["dynamic"]["value"]
+    cortical = summary["margins"]["dynamic"].get("cortical", {})
+    if cortical.get("yield_MPa") and outside:
+        lines.append(f"| cortical, outside {excl:g} mm of the patch | {_fmt(outside)} | {cortical['yield_MPa']:g} "
+                     f"(yield) | {_fmt(cortical['yield_MPa'] / outside, 3)} |")
     if modal:
         lines += ["", f"Lowest natural frequency {modal['frequencies_Hz'][0]:.1f} Hz (period "
                       f"{1e3 / modal['frequencies_Hz'][0]:.2f} ms) against a time step of "
@@ -66,7 +73,8 @@ def run_report(summary: dict) -> str:
     lines += ["", f"Solved with {solver['linear_solver']} in {summary['timings']['total_s']:.1f} s "
                   f"(mesh {summary['timings']['mesh_s']:.1f} s"
                   f"{', cached' if mesh.get('cache_hit') else ''}). Figures: loads.png, deflection.png, "
-                  "von_mises.png, femur.png. Fields: fields/fields.pvd (ParaView).", ""]
+                  "von_mises.png, femur.png. Fields for ParaView: fields/dynamic.pvd and fields/static.pvd "
+                  "(`femstudy view` shows them).", ""]
     return "\n".join(lines)
 
 

@@ -1,0 +1,138 @@
+"""The study end to end (`femstudy run`) on the built-in femur at a coarse size."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from conftest import REPO, run_cli
+from femstudy.casefile import parse_case
+from femstudy.console import Console
+from femstudy.study.run import run_case
+
+CASE = """
+name = "e2e"
+[mesh]
+size_mm = 16.0
+order = {order}
+[drilling]
+load_scale = {scale}
+[time]
+end_s = 3.0
+step_s = {step}
+[analysis]
+modes = 2
+[output]
+fields_every = 2
+screenshot = {screenshot}
+"""
+
+
+def run(tmp_path, mesh_cache, monkeypatch, order=2, scale=1.0, step=0.5, screenshot="true", name="run"):
+    monkeypatch.setenv("FEMSTUDY_CACHE", str(mesh_cache))
+    case = parse_case(CASE.format(order=order, scale=scale, step=step, screenshot=screenshot))
+    out = tmp_path / name
+    return run_case(case, out, console=Console(quiet=True)), out
+
+
+@pytest.fixture(scope="module")
+def p2_run(tmp_path_factory, mesh_cache):
+    with pytest.MonkeyPatch.context() as mp:
+        return run(tmp_path_factory.mktemp("study"), mesh_cache, mp)
+
+
+def test_results_folder_is_complete(p2_run):
+    summary, out = p2_run
+    for name in ("summary.json", "timeseries.csv", "report.md", "loads.png", "deflection.png",
+                 "von_mises.png", "femur.png", "fields/dynamic.pvd", "fields/static.pvd"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    assert json.loads((out / "summary.json").read_text())["results"] == json.loads(json.dumps(summary["results"]))
+    rows = list(csv.DictReader((out / "timeseries.csv").open()))
+    assert set(rows[0]) == {"loading", "time_s", "thrust_N", "torque_Nmm", "max_deflection_mm",
+                            "drill_point_deflection_mm", "max_von_mises_MPa", "max_von_mises_excl_MPa"}
+    assert {r["loading"] for r in rows} == {"dynamic", "static"} and len(rows) == 2 * 7
+    assert "| maximum deflection [mm] |" in (out / "report.md").read_text()
+
+
+def test_results_are_consistent(p2_run):
+    summary, _ = p2_run
+    res = summary["results"]
+    for quantity in ("max_deflection_mm", "max_von_mises_MPa"):
+        assert res[quantity]["dynamic"]["value"] >= res[quantity]["static"]["value"] > 0
+    assert res["drill_point_deflection_mm"]["dynamic"]["value"] <= res["max_deflection_mm"]["dynamic"]["value"]
+    assert res["max_von_mises_excl_MPa"]["dynamic"]["value"] <= res["max_von_mises_MPa"]["dynamic"]["value"]
+    # the drilling load peaks at breakthrough (3 s) and the response is quasi-static
+    assert res["max_deflection_mm"]["dynamic"]["time_s"] == pytest.approx(3.0)
+    assert summary["modal"]["step_check"] == "quasi-static"
+    assert summary["modal"]["dynamic_amplification"] == pytest.approx(1.0, abs=0.01)
+    # the deflection ratio follows the load ratio (thrust dominates the bending)
+    load = summary["loading"]
+    assert res["max_deflection_mm"]["ratio_dynamic_to_static"] == pytest.approx(
+        load["peak_thrust_N"] / load["static_thrust_N"], rel=0.1)
+
+
+def test_fields_are_readable_time_series(p2_run):
+    import pyvista as pv
+
+    _, out = p2_run
+    reader = pv.get_reader(str(out / "fields" / "dynamic.pvd"))
+    assert list(reader.time_values) == pytest.approx([0, 1.0, 2.0, 3.0])
+    reader.set_active_time_value(3.0)
+    grid = reader.read()[0]
+    u = np.linalg.norm(grid.point_data["displacement_mm"], axis=1)
+    summary, _ = p2_run
+    assert u.max() == pytest.approx(summary["results"]["max_deflection_mm"]["dynamic"]["value"], rel=1e-6)
+    assert set(np.unique(grid.cell_data["region"])) == {1, 2, 3}
+
+
+def test_zero_load_gives_zero_response(tmp_path, mesh_cache, monkeypatch):
+    summary, _ = run(tmp_path, mesh_cache, monkeypatch, order=1, scale=0.0, step=1.0, screenshot="false")
+    for quantity in ("max_deflection_mm", "max_von_mises_MPa"):
+        assert summary["results"][quantity]["dynamic"]["value"] == 0.0
+        assert summary["results"][quantity]["static"]["value"] == 0.0
+
+
+def test_doubling_the_loads_doubles_the_response(tmp_path, mesh_cache, monkeypatch):
+    one, _ = run(tmp_path, mesh_cache, monkeypatch, order=1, scale=1.0, step=1.0, screenshot="false", name="one")
+    two, _ = run(tmp_path, mesh_cache, monkeypatch, order=1, scale=2.0, step=1.0, screenshot="false", name="two")
+    for quantity in ("max_deflection_mm", "drill_point_deflection_mm", "max_von_mises_MPa"):
+        for loading in ("dynamic", "static"):
+            assert two["results"][quantity][loading]["value"] == pytest.approx(
+                2 * one["results"][quantity][loading]["value"], rel=1e-9)
+
+
+def test_view_writes_a_screenshot(p2_run, tmp_path):
+    _, out = p2_run
+    proc = run_cli("view", str(out), "--field", "displacement", "--screenshot", str(tmp_path / "v.png"))
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "v.png").stat().st_size > 10_000
+
+
+def test_interrupted_run_never_leaves_a_complete_looking_folder(tmp_path, mesh_cache, p2_run):
+    """kill -9 at several moments: results/<name> is either absent or complete; the next run
+    succeeds and reuses the cached mesh."""
+    case = tmp_path / "e2e.toml"
+    case.write_text(CASE.format(order=2, scale=1.0, step=0.5, screenshot="true"))
+    env = {**os.environ, "FEMSTUDY_CACHE": str(mesh_cache), "MPLBACKEND": "Agg"}
+    out = tmp_path / "results" / "e2e"
+    for delay in (1.0, 4.0, 8.0):
+        proc = subprocess.Popen([sys.executable, "-m", "femstudy", "run", str(case), "--out", str(out), "--quiet"],
+                                cwd=tmp_path, env=env, start_new_session=True,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(delay)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        if out.exists():
+            assert (out / "summary.json").is_file() and (out / "report.md").is_file()
+        visible = [p.name for p in out.parent.iterdir() if not p.name.startswith(".")] if out.parent.exists() else []
+        assert visible in ([], ["e2e"])
+    done = run_cli("run", str(case), "--out", str(out), cwd=tmp_path, env={"FEMSTUDY_CACHE": str(mesh_cache)})
+    assert done.returncode == 0, done.stderr
+    assert "loaded cached mesh" in done.stderr
+    assert json.loads((out / "summary.json").read_text())["mesh"]["cache_hit"] is True
