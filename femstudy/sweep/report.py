@@ -1,0 +1,127 @@
+"""Tables, convergence verdicts and plots of a sweep."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from femstudy import atomic
+from femstudy.sweep.convergence import assess, coarsest_meeting_target
+
+MESH_COLUMNS = ["size_mm", "order", "refine", "site_size_mm", "nodes", "elements", "dofs", "h_rep_mm",
+                "max_deflection_mm", "drill_point_deflection_mm", "max_von_mises_MPa",
+                "max_von_mises_excl_MPa", "mesh_s", "tetwild_s", "mesh_cache_hit", "assembly_s", "solve_s"]
+#: quantity -> (formal order for P1, for P2, singular at the patch edge?)
+QUANTITIES = {"max_deflection_mm": (2, 3, False), "drill_point_deflection_mm": (2, 3, False),
+              "max_von_mises_MPa": (1, 2, True), "max_von_mises_excl_MPa": (1, 2, False)}
+
+
+def table_csv(rows: list[dict], columns: list[str]) -> str:
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+    return buf.getvalue()
+
+
+def table_markdown(rows: list[dict], columns: list[str]) -> str:
+    def cell(v):
+        if v is None:
+            return "–"
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(cell(r.get(c)) for c in columns) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def groups(rows: list[dict]) -> dict[tuple, list[dict]]:
+    """Mesh rows grouped by (order, refine), each sorted fine to coarse."""
+    out: dict[tuple, list[dict]] = {}
+    for row in rows:
+        out.setdefault((row["order"], row["refine"]), []).append(row)
+    return {k: sorted(v, key=lambda r: r["h_rep_mm"]) for k, v in sorted(out.items())}
+
+
+def convergence(rows: list[dict], target: float) -> dict:
+    """Per group and quantity: the assessment from the three finest meshes, and the
+    coarsest global size whose max deflection is within ``target`` of the extrapolated value."""
+    out = {}
+    for (order, refine), group in groups(rows).items():
+        entry = {"points": len(group), "quantities": {}}
+        if len(group) >= 3:
+            h = [r["h_rep_mm"] for r in group]
+            for quantity, (p1, p2, singular) in QUANTITIES.items():
+                values = [r[quantity] for r in group]
+                if any(v is None or not np.isfinite(v) for v in values):
+                    continue
+                a = assess(quantity, h, values, expected_order=p2 if order == 2 else p1, singular_hint=singular)
+                entry["quantities"][quantity] = a.as_dict()
+            deflection = entry["quantities"].get("max_deflection_mm")
+            if deflection and deflection["extrapolated"] is not None:
+                best = coarsest_meeting_target([r["size_mm"] for r in group],
+                                               [r["max_deflection_mm"] for r in group],
+                                               deflection["extrapolated"], target)
+                entry["recommended_size_mm"] = best[0] if best else None
+                entry["recommended_error"] = best[1] if best else None
+        out[f"P{order}-{refine}"] = entry
+    return out
+
+
+def convergence_markdown(assessment: dict, target: float) -> str:
+    lines = []
+    for name, entry in assessment.items():
+        lines += [f"### {name}", ""]
+        if not entry["quantities"]:
+            lines += [f"{entry['points']} point(s): at least three are needed for an observed order.", ""]
+            continue
+        lines += ["| quantity | finest values | observed order | extrapolated | GCI (fine) | verdict |",
+                  "|---|---|---|---|---|---|"]
+        for q, a in entry["quantities"].items():
+            order = "–" if a["observed_order"] is None else f"{a['observed_order']:.2f}"
+            ext = "–" if a["extrapolated"] is None else f"{a['extrapolated']:.5g}"
+            gci = "–" if a["gci_fine"] is None else f"{100 * a['gci_fine']:.2f} %"
+            vals = ", ".join(f"{v:.5g}" for v in a["values"])
+            lines.append(f"| {q} | {vals} | {order} | {ext} | {gci} | {a['verdict']}: {a['reason']} |")
+        size = entry.get("recommended_size_mm")
+        lines += ["", f"Recommended global size: **{size:g} mm** (max deflection within "
+                      f"{100 * entry['recommended_error']:.2f} % of the extrapolated value; target {100 * target:g} %)."
+                  if size else f"No size in this sweep meets the {100 * target:g} % target on max deflection.", ""]
+    return "\n".join(lines)
+
+
+def plots(folder: Path, rows: list[dict], assessment: dict) -> list[str]:
+    """quantity vs element size and vs DOFs (log scales), one line per (order, refine)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    for x_key, x_label, name in (("size_mm", "global element size [mm]", "vs_size.png"),
+                                 ("dofs", "degrees of freedom", "vs_dofs.png")):
+        fig, axes = plt.subplots(2, 2, figsize=(11, 8), constrained_layout=True)
+        for ax, quantity in zip(axes.ravel(), QUANTITIES):
+            for (order, refine), group in groups(rows).items():
+                pts = sorted((r[x_key], r[quantity]) for r in group if r[quantity] is not None)
+                ax.plot(*zip(*pts), marker="o", label=f"P{order}, {refine}")
+                extrapolated = assessment[f"P{order}-{refine}"]["quantities"].get(quantity, {}).get("extrapolated")
+                if extrapolated is not None:
+                    ax.axhline(extrapolated, ls=":", lw=1, color=ax.lines[-1].get_color())
+            ax.set_xscale("log")
+            if x_key == "size_mm":
+                ax.invert_xaxis()
+            ax.set_xlabel(x_label)
+            ax.set_ylabel(quantity.replace("_mm", " [mm]").replace("_MPa", " [MPa]").replace("_", " "))
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=8)
+        fig.suptitle("Mesh convergence (dotted: Richardson-extrapolated value)")
+        with atomic.atomic_path(folder / name) as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+        plt.close(fig)
+        written.append(name)
+    return written

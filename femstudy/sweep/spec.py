@@ -1,0 +1,74 @@
+"""Which points a sweep computes: a mesh-convergence ladder, or a parameter grid/list.
+
+Parameter sweeps are TOML files::
+
+    case = "middiaphysis.toml"          # relative to this file
+    name = "feed-speed"                 # results/sweep-<name>/ (default: file name)
+
+    [grid]                              # full factorial over dotted case keys
+    "drilling.feed_mm_s" = [1.0, 1.5, 2.0]
+    "drilling.spindle_rpm" = [1000, 1500]
+
+    [[point]]                           # and/or an explicit list of points
+    "site.position" = 0.2
+    "site.direction" = "lateral"
+
+In a mesh-convergence sweep the site's local size scales with the global size, keeping the
+case's ratio site_size_mm / size_mm, so that every mesh is a uniform refinement of the
+previous one (the premise of Richardson extrapolation).
+"""
+
+from __future__ import annotations
+
+import itertools
+import tomllib
+from pathlib import Path
+
+from femstudy.casefile import Case, with_overrides
+from femstudy.errors import UserError, require
+from femstudy.sweep.execute import Point
+
+
+def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list[str]) -> list[Point]:
+    """One point per (size, order, refinement)."""
+    require(len(sizes) > 0 and all(s > 0 for s in sizes), f"--sizes must be positive lengths in mm, got {sizes}")
+    ratio = case.mesh.site_size_mm / case.mesh.size_mm
+    points = []
+    for order, refine, size in itertools.product(orders, refines, sorted(set(sizes), reverse=True)):
+        overrides = {"mesh.size_mm": float(size), "mesh.order": order, "mesh.refine": refine}
+        if refine == "site":
+            overrides["mesh.site_size_mm"] = round(float(size) * ratio, 6)
+        points.append(Point("mesh", overrides, label=f"P{order} {refine} {size:g} mm"))
+    for p in points:  # validate every point before any work
+        with_overrides(case, p.overrides)
+    return points
+
+
+def read_parameter_sweep(path: Path) -> tuple[str, Path, list[Point]]:
+    """(name, case file, points) of a parameter-sweep TOML file."""
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read sweep file {path}: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: TOML syntax error: {exc}") from None
+    unknown = set(doc) - {"case", "name", "grid", "point"}
+    require(not unknown, f"{path}: unknown key(s) {', '.join(sorted(unknown))}; a sweep file has case, name, "
+                         f"[grid] and [[point]]")
+    require(isinstance(doc.get("case"), str), f"{path}: 'case' must name the case file to sweep")
+    case_path = (path.parent / doc["case"]).resolve()
+    grid = doc.get("grid", {})
+    listed = doc.get("point", [])
+    require(isinstance(grid, dict) and isinstance(listed, list), f"{path}: [grid] is a table, [[point]] a list")
+    require(grid or listed, f"{path}: give a [grid] or at least one [[point]]")
+    for key, values in grid.items():
+        require(isinstance(values, list) and values, f"{path}: grid key '{key}' needs a non-empty list of values")
+    points = []
+    keys = list(grid)
+    for combo in itertools.product(*(grid[k] for k in keys)) if keys else []:
+        overrides = dict(zip(keys, combo))
+        points.append(Point("study", overrides, label=", ".join(f"{k}={v}" for k, v in overrides.items())))
+    for overrides in listed:
+        require(isinstance(overrides, dict) and overrides, f"{path}: every [[point]] needs at least one key")
+        points.append(Point("study", overrides, label=", ".join(f"{k}={v}" for k, v in overrides.items())))
+    return str(doc.get("name", path.stem)), case_path, points
