@@ -15,7 +15,7 @@ from femstudy import __version__
 from femstudy.errors import UserError
 
 #: Sub-command modules, in the order ``femstudy --help`` lists them.
-COMMANDS = ["loads", "synth", "calibrate", "normality", "diagnose", "femur", "mesh"]
+COMMANDS = ["run", "view", "sweep", "mesh", "femur", "loads", "synth", "calibrate", "normality", "diagnose"]
 
 
 class _Parser(argparse.ArgumentParser):
