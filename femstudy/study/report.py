@@ -97,27 +97,39 @@ def study_table(summaries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-STUDY_DISCUSSION = """\
+def study_discussion(summaries: list[dict]) -> str:
+    """Why the numbers differ from the thesis's Tables 5-14/5-15, with this study's load ratios."""
+    load = summaries[0]["loading"]
+    thrust_ratio = load["peak_thrust_N"] / load["static_thrust_N"]
+    torque_ratio = load["peak_torque_Nmm"] / load["static_torque_Nmm"]
+    periods = [s["modal"]["lowest_period_s"] for s in summaries if s.get("modal")]
+    period = f"at most {1e3 * max(periods):.1f} ms" if periods else "a few ms on a femur"
+    step = summaries[0]["case"]["time"]["step_s"]
+    return f"""\
 Why the numbers differ from the thesis's Tables 5-14/5-15:
 
-- **Geometry.** The thesis used a commercial solid model (Pacific Research Labs, medium left femur)
-  meshed by ANSYS at 22 mm; femstudy uses its parametric femur (or your surface) with a smooth canal
-  carved from the outer surface and a cortex profile set in the case file. Local cortical thickness and
-  the section's second moment of area at the site control both deflection and stress.
-- **Load patch versus point load.** The thesis applied a force and a torque at a point (Fig 3-13). A
-  point load on a 3-D continuum has unbounded local displacement and stress, so its "maximum" values
-  depend on the mesh. femstudy spreads the thrust over the drill footprint (Ø 2.7 mm) and the torque as
-  a linearly varying shear. The maximum stress it reports next to the patch is finite but still
-  mesh-sensitive. The stress outside the exclusion radius is the converged measure; see
-  `femstudy sweep`.
-- **Element order and size.** ANSYS's default 10-node tetrahedra at 22 mm cannot resolve a drill-sized
-  load. femstudy uses P2 tetrahedra refined to about 1 mm at the site.
-- **Clamp extent.** Both ends are fixed over `clamps.length_mm` of surface. The thesis's Fig 3-12 fixes
-  end faces of unstated extent, so a longer clamp stiffens short end segments, which matters at the
-  proximal and distal sites.
-- **Loads.** The dynamic/static ratio here is the ratio of the chip-clogging load at breakthrough to the
-  Allotta full-engagement load, because the response is quasi-static (see each report's modal
-  paragraph). The thesis's ratio of about 4.8 implies a larger load growth than its own calibrated
-  model gives over a 6 mm cortex at 2 mm/s and 1500 rpm (exp(p·z) ≈ 2.4 here). Its static Allotta load
-  used literature specific cutting energies that it does not state.
+- **Loads.** The response is quasi-static (lowest natural period {period} against {step:g} s steps; see
+  each report's modal paragraph), so every dynamic/static ratio is a ratio of loads. Here the
+  chip-clogging thrust at breakthrough is {thrust_ratio:.2f}x the static Allotta thrust
+  ({load['peak_thrust_N']:.1f} N against {load['static_thrust_N']:.1f} N) and the torque {torque_ratio:.2f}x
+  ({load['peak_torque_Nmm']:.1f} against {load['static_torque_Nmm']:.1f} N·mm). Deflection follows the
+  thrust; the peak stress under the drill follows the torque's shear, so the two ratios differ. The thesis reports one ratio, 4.76, for both deflection and
+  stress at every site, as if both loads had been scaled by one factor; its own calibrated clogging model
+  does not grow that much over a 6 mm cortex at 2 mm/s and 1500 rpm, and its static Allotta load used
+  specific cutting energies it does not state (docs/study.md).
+- **Geometry.** The thesis used a commercial solid femur meshed by ANSYS at 22 mm; femstudy uses its
+  built-in femur (or your surface) with the canal carved inside a cortex of the case's thickness profile.
+  Local cortical thickness and the section's second moment of area set deflection and stress.
+- **Load patch versus point load.** The thesis applied force and torque at a point. A point load on a 3-D
+  continuum has unbounded local displacement and stress, so its "maximum" depends on the mesh. femstudy
+  spreads the thrust over the drill footprint (Ø 2.7 mm) and the torque as a shear growing with radius.
+  The peak stress under the patch is finite but mesh-sensitive (its convergence is assessed by
+  `femstudy sweep`); the stress outside the exclusion radius is the converged measure. The thesis's
+  proximal and distal stresses (0.31 and 0.19 MPa against 21.8 MPa at mid-diaphysis, under the same loads)
+  cannot be peaks under the drill point and were presumably read elsewhere.
+- **Element order and size.** 22 mm elements cannot resolve a drill-sized load. femstudy uses P2
+  tetrahedra refined to about 1 mm at the site.
+- **Clamp extent and site position.** Both ends are fixed over the case's clamp length of surface; the
+  thesis fixes end faces of unstated extent. The proximal and distal sites sit between the metaphysis and
+  the clamp, where the clamp extent and the exact position change the deflection most.
 """

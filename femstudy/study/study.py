@@ -6,12 +6,12 @@ import json
 from pathlib import Path
 
 from femstudy import atomic
-from femstudy.study.report import STUDY_DISCUSSION, study_table
+from femstudy.study.report import study_discussion, study_table
 
 
 def write_study(folder: Path, summaries: list[dict]) -> Path:
     """Write ``study.md`` (table beside Tables 5-14/5-15 plus discussion) and ``study.json``."""
-    text = "\n".join(["# Drilling study: all sites", "", study_table(summaries), "", STUDY_DISCUSSION])
+    text = "\n".join(["# Drilling study: all sites", "", study_table(summaries), "", study_discussion(summaries)])
     folder = Path(folder)
     atomic.write_text(folder / "study.md", text)
     atomic.write_text(folder / "study.json", json.dumps(
