@@ -7,11 +7,17 @@ where the P2 stress is most accurate; 1 per P1 tet). von Mises:
 Stresses next to the load patch's edge do not converge under mesh refinement (the
 traction jumps there), so :func:`response` reports the maximum both overall and outside an
 exclusion radius around the footprint centre.
+
+Stresses are linear in u: σ = S u with S = D B stacked over every stress point. S is
+assembled once per system and cached when it takes under a tenth of the free memory
+(≈ 0.2 GB for 180k P2 DOFs), so a transient's per-step stresses cost one sparse product
+instead of recomputing B element by element.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from femstudy.fe.assembly import CHUNK, jacobians, strain_matrices
 from femstudy.femur_model import REGION_NAMES
@@ -22,15 +28,45 @@ def _chunks(n: int):
         yield np.arange(start, min(start + CHUNK, n))
 
 
+def _element_dofs(system, cells: np.ndarray) -> np.ndarray:
+    """(n, 3 nbf) DOF numbers of ``cells``, node-major as in :func:`strain_matrices`."""
+    return (3 * system.cells[cells][:, :, None] + np.arange(3)).reshape(len(cells), -1)
+
+
+def stress_operator(system) -> sp.csr_matrix | None:
+    """S (n_tets·nq·6, n_dofs) [MPa/mm] with σ = S u, rows ordered (element, point, Voigt
+    component); built on first use and cached, or None when it would not fit (see above)."""
+    key = ("", "stress-operator")
+    if key not in system.cache:
+        from femstudy.fe.linsolve import available_memory_bytes
+
+        nq, width = len(system.ref.weights), 3 * system.cells.shape[1]
+        rows = system.n_tets * nq * 6
+        if rows * width * 12 > 0.1 * available_memory_bytes():
+            system.cache[key] = None
+        else:
+            data = np.empty((system.n_tets, nq, 6, width))
+            for part in _chunks(system.n_tets):
+                B, _ = strain_matrices(system, part)
+                data[part] = system.materials.D[system.materials.index[part]][:, None] @ B
+            columns = np.broadcast_to(_element_dofs(system, np.arange(system.n_tets))[:, None, None, :], data.shape)
+            system.cache[key] = sp.csr_matrix((data.ravel(), columns.ravel().astype(np.int32),
+                                               np.arange(rows + 1, dtype=np.int64) * width),
+                                              shape=(rows, system.n_dofs))
+    return system.cache[key]
+
+
 def element_stress(system, u: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
     """σ (n, nq, 6) [MPa], Voigt [xx, yy, zz, yz, xz, xy], at the quadrature points of ``cells``."""
+    nq = len(system.ref.weights)
+    if cells is None and (S := stress_operator(system)) is not None:
+        return (S @ u).reshape(system.n_tets, nq, 6)
     cells = np.arange(system.n_tets) if cells is None else np.asarray(cells)
-    out = np.empty((len(cells), len(system.ref.weights), 6))
-    dofs = 3 * system.cells[:, :, None] + np.arange(3)
+    out = np.empty((len(cells), nq, 6))
     for part in _chunks(len(cells)):
         idx = cells[part]
         B, _ = strain_matrices(system, idx)
-        strain = B @ u[dofs[idx].reshape(len(idx), 1, -1, 1)]
+        strain = B @ u[_element_dofs(system, idx)][:, None, :, None]
         out[part] = (system.materials.D[system.materials.index[idx]][:, None] @ strain)[..., 0]
     return out
 
@@ -84,7 +120,10 @@ def response(system, u: np.ndarray, patch, exclusion_radius_mm: float) -> dict:
     node = int(np.argmax(magnitude))
     drill = patch.mean @ u
     vm = von_mises(element_stress(system, u))
-    xq = quadrature_points(system)
+    key = ("", "stress-points")
+    if key not in system.cache:
+        system.cache[key] = quadrature_points(system)
+    xq = system.cache[key]
     outside = np.linalg.norm(xq - patch.centre, axis=2) > exclusion_radius_mm
     flat = int(np.argmax(vm))
     out = {"max_deflection_mm": float(magnitude[node]), "max_deflection_at_mm": system.nodes[node].tolist(),
@@ -99,11 +138,13 @@ def response(system, u: np.ndarray, patch, exclusion_radius_mm: float) -> dict:
         out["max_von_mises_outside_at_mm"] = xq.reshape(-1, 3)[flat_out].tolist()
     else:
         out["max_von_mises_outside_MPa"], out["max_von_mises_outside_at_mm"] = np.nan, None
+    key = ("", "region-nodes")
+    if key not in system.cache:
+        system.cache[key] = {int(code): (system.region == code, np.unique(system.cells[system.region == code]))
+                             for code in np.unique(system.region)}
     regions = {}
-    for code in np.unique(system.region):
-        cells = system.region == code
-        nodes = np.unique(system.cells[cells])
-        regions[REGION_NAMES.get(int(code), str(code))] = {
+    for code, (cells, nodes) in system.cache[key].items():
+        regions[REGION_NAMES.get(code, str(code))] = {
             "max_von_mises_MPa": float(vm[cells].max()), "max_deflection_mm": float(magnitude[nodes].max())}
     out["regions"] = regions
     return out
