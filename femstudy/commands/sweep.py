@@ -55,12 +55,15 @@ def _execute(args, points, case, case_path, folder, runs=None):
     from femstudy.sweep import points as point_functions
     from femstudy.sweep.execute import execute
 
+    from femstudy.meshing.cache import cache_root
+
     console = Console(quiet=args.quiet)
     text = case_path.read_text(encoding="utf-8")
     memory = None
-    if args.workers > 1 and not args.scheduler:
+    if args.workers > 1 or args.scheduler:  # workers then read the meshes built here
         memory = _mesh_first(points, case, console)
-    return execute(points, folder / "points", point_functions.evaluate, (text, str(case_path), runs),
+    return execute(points, folder / "points", point_functions.evaluate,
+                   (text, str(case_path), runs, str(cache_root().resolve())),
                    workers=args.workers, scheduler=args.scheduler, memory_bytes=memory, console=console)
 
 

@@ -8,11 +8,16 @@
 - ``study`` points (parameter sweeps): the full study (`femstudy run`) of the case with the
   point's overrides, into its own results folder; returns the headline numbers.
 
-The case travels as its TOML text and path, which pickle to any process or Dask worker.
+The case travels as its TOML text and path, which pickle to any process or Dask worker,
+with the client's mesh-cache folder: the client meshes every point first, and workers read
+those meshes instead of running TetWild themselves. TetWild is not deterministic, so this is
+what makes a Dask run's numbers identical to a local run's; on a cluster the cache folder
+must therefore be on a file system the workers share (or be a path they can all read).
 """
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -26,8 +31,12 @@ def _case(point: Point, case_text: str, case_source: str):
     return with_overrides(parse_case(case_text, Path(case_source)), point.overrides)
 
 
-def evaluate(point: Point, case_text: str, case_source: str, runs_folder: str | None = None) -> dict:
-    """Evaluate a point (picklable entry point for the process pool and Dask)."""
+def evaluate(point: Point, case_text: str, case_source: str, runs_folder: str | None = None,
+             mesh_cache: str | None = None) -> dict:
+    """Evaluate a point (picklable entry point for the process pool and Dask); meshes come
+    from ``mesh_cache`` when given."""
+    if mesh_cache:
+        os.environ["FEMSTUDY_CACHE"] = mesh_cache
     case = _case(point, case_text, case_source)
     if point.kind == "mesh":
         return mesh_point(case)
@@ -63,6 +72,7 @@ def mesh_point(case) -> dict:
     return {
         "size_mm": case.mesh.size_mm, "order": case.mesh.order, "refine": case.mesh.refine,
         "site_size_mm": case.mesh.site_size_mm if case.mesh.refine == "site" else None,
+        "envelope": case.mesh.envelope,
         "nodes": len(system.nodes), "elements": system.n_tets, "dofs": system.n_dofs,
         "h_rep_mm": (volume / system.n_tets) ** (1 / 3),
         "load_time_s": t_peak, "thrust_N": thrust, "torque_Nmm": torque,

@@ -11,7 +11,7 @@ import numpy as np
 from femstudy import atomic
 from femstudy.sweep.convergence import assess, coarsest_meeting_target
 
-MESH_COLUMNS = ["size_mm", "order", "refine", "site_size_mm", "nodes", "elements", "dofs", "h_rep_mm",
+MESH_COLUMNS = ["size_mm", "order", "refine", "site_size_mm", "envelope", "nodes", "elements", "dofs", "h_rep_mm",
                 "max_deflection_mm", "drill_point_deflection_mm", "max_von_mises_MPa",
                 "max_von_mises_excl_MPa", "mesh_s", "tetwild_s", "mesh_cache_hit", "assembly_s", "solve_s"]
 #: quantity -> (formal order for P1, for P2, singular at the patch edge?)

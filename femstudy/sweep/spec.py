@@ -13,9 +13,14 @@ Parameter sweeps are TOML files::
     "site.position" = 0.2
     "site.direction" = "lateral"
 
-In a mesh-convergence sweep the site's local size scales with the global size, keeping the
-case's ratio site_size_mm / size_mm, so that every mesh is a uniform refinement of the
-previous one (the premise of Richardson extrapolation).
+In a mesh-convergence sweep the site's local size and TetWild's envelope scale with the
+global size, keeping the case's ratios site_size_mm / size_mm and envelope / size_mm, so that
+the meshes refine everywhere together (the premise of Richardson extrapolation). With a fixed
+envelope the surface detail it preserves, not the size, sets the elements near the surface:
+on the built-in femur at envelope 1e-3, sizes 24, 20 and 16 mm all gave 15,800–16,800 P1
+DOFs, while the scaled envelope gives 4,633 tets at 32 mm and 13,558 at 16 mm. The
+convergence assessment uses the representative size h = (V / elements)^(1/3), not the
+nominal one.
 """
 
 from __future__ import annotations
@@ -33,9 +38,11 @@ def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list
     """One point per (size, order, refinement)."""
     require(len(sizes) > 0 and all(s > 0 for s in sizes), f"--sizes must be positive lengths in mm, got {sizes}")
     ratio = case.mesh.site_size_mm / case.mesh.size_mm
+    envelope_per_mm = case.mesh.envelope / case.mesh.size_mm
     points = []
     for order, refine, size in itertools.product(orders, refines, sorted(set(sizes), reverse=True)):
-        overrides = {"mesh.size_mm": float(size), "mesh.order": order, "mesh.refine": refine}
+        overrides = {"mesh.size_mm": float(size), "mesh.order": order, "mesh.refine": refine,
+                     "mesh.envelope": min(0.05, round(float(size) * envelope_per_mm, 9))}
         if refine == "site":
             overrides["mesh.site_size_mm"] = round(float(size) * ratio, 6)
         points.append(Point("mesh", overrides, label=f"P{order} {refine} {size:g} mm"))

@@ -1,0 +1,88 @@
+"""`femstudy sweep` on real meshes of the built-in femur (coarse sizes, P1 and a short study)."""
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from conftest import assert_clean_failure, run_cli
+
+CASE = """
+name = "sweeptest"
+[mesh]
+size_mm = 16.0
+order = 1
+[time]
+end_s = 3.0
+step_s = 1.0
+[output]
+fields = false
+screenshot = false
+"""
+
+
+@pytest.fixture(scope="module")
+def case_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("sweep-case") / "case.toml"
+    path.write_text(CASE)
+    return path
+
+
+def test_mesh_sweep_writes_table_and_convergence_assessment(case_file, mesh_cache, tmp_path):
+    out = tmp_path / "mesh"
+    proc = run_cli("sweep", str(case_file), "--sizes", "32,24,16", "--order", "1", "--out", str(out),
+                   env={"FEMSTUDY_CACHE": str(mesh_cache)}, timeout=900)
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((out / "sweep.csv").open()))
+    assert [float(r["size_mm"]) for r in rows] == [32.0, 24.0, 16.0]
+    # the envelope scales with the size, so the meshes refine everywhere together
+    assert [float(r["envelope"]) for r in rows] == pytest.approx([2e-3, 1.5e-3, 1e-3])
+    h = [float(r["h_rep_mm"]) for r in rows]
+    assert h[0] > h[1] > h[2], h
+    dofs = [int(r["dofs"]) for r in rows]
+    assert dofs == sorted(dofs), dofs
+    assert all(float(r["max_deflection_mm"]) > 0 for r in rows)
+    assessment = json.loads((out / "convergence.json").read_text())
+    quantities = assessment["P1-site"]["quantities"]
+    assert {"max_deflection_mm", "max_von_mises_MPa", "max_von_mises_excl_MPa"} <= set(quantities)
+    assert all(q["verdict"] in ("converged", "converging", "not converging")
+               for q in quantities.values()), quantities
+    text = (out / "sweep.md").read_text()
+    assert "GCI" in text and "![" in text
+    for figure in Path(out).glob("*.png"):
+        assert figure.stat().st_size > 10_000
+    # resumed: nothing recomputed, same table
+    again = run_cli("sweep", str(case_file), "--sizes", "32,24,16", "--order", "1", "--out", str(out),
+                    env={"FEMSTUDY_CACHE": str(mesh_cache)})
+    assert again.returncode == 0 and "3 of 3 points already finished" in again.stderr, again.stderr
+    assert list(csv.DictReader((out / "sweep.csv").open())) == rows
+
+
+def test_parameter_sweep_is_linear_in_load_and_identical_on_dask(case_file, mesh_cache, tmp_path):
+    sweep = tmp_path / "scale.toml"
+    sweep.write_text(f'case = "{case_file.as_posix()}"\nname = "scale"\n[grid]\n"drilling.load_scale" = [1.0, 2.0]\n')
+    env = {"FEMSTUDY_CACHE": str(mesh_cache)}
+    local = run_cli("sweep", str(sweep), "--out", str(tmp_path / "local"), "--workers", "2", env=env)
+    assert local.returncode == 0, local.stderr
+    rows = list(csv.DictReader((tmp_path / "local" / "sweep.csv").open()))
+    assert [float(r["drilling.load_scale"]) for r in rows] == [1.0, 2.0]
+    one, two = (float(r["max_deflection_mm_dynamic"]) for r in rows)
+    assert two == pytest.approx(2 * one, rel=2e-6)  # the CSV keeps 6 significant digits
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        remote = run_cli("sweep", str(sweep), "--out", str(tmp_path / "dask"), "--scheduler",
+                         cluster.scheduler_address, env=env)
+    assert remote.returncode == 0, remote.stderr
+    remote_rows = list(csv.DictReader((tmp_path / "dask" / "sweep.csv").open()))
+    physics = [k for k in rows[0] if k not in ("total_s",)]
+    assert [{k: r[k] for k in physics} for r in remote_rows] == [{k: r[k] for k in physics} for r in rows]
+
+
+def test_bad_sweep_requests_fail_cleanly(case_file, tmp_path):
+    assert_clean_failure(run_cli("sweep", str(case_file)), "needs --sizes")
+    assert_clean_failure(run_cli("sweep", str(case_file), "--sizes", "8,-4"), "--sizes must be positive")
+    bad = tmp_path / "bad.toml"
+    bad.write_text(f'case = "{case_file.as_posix()}"\n[grid]\n"drilling.feed_mm_s" = [1.0, -2.0]\n')
+    assert_clean_failure(run_cli("sweep", str(bad)), "feed_mm_s")
