@@ -68,7 +68,7 @@ def step_check(lowest_period_s: float, dt_s: float) -> dict:
 
 
 def solve_transient(system, bc, patterns, amplitudes, times_s, *, damping=(0.0, 0.0), keep=(), observe=None,
-                    u0=None, v0=None, quasi_static: bool = True, method: str = "auto", console=None) -> TransientResult:
+                    u0=None, v0=None, quasi_static: bool = False, method: str = "auto", console=None) -> TransientResult:
     """March the model through ``times_s`` (uniform steps) from the state (u0, v0) at times_s[0].
 
     patterns   : (n_dofs, k) load patterns [N per unit amplitude], e.g. DrillPatch.patterns
@@ -79,7 +79,9 @@ def solve_transient(system, bc, patterns, amplitudes, times_s, *, damping=(0.0, 
     u0, v0     : initial displacement [mm] and velocity [mm/s] (full vectors; default at rest);
                  the initial acceleration satisfies M a0 = f(t0) − K u0 − C v0
     quasi_static: also report the static response to f(t) at every step and the dynamic
-                 amplification = max transient deflection / max quasi-static deflection
+                 amplification = max transient deflection / max quasi-static deflection (this
+                 needs the factorisation of K as well as K̂; a static solve on the same
+                 constraints shares it)
     """
     t = np.asarray(times_s, dtype=float)
     P = np.asarray(patterns, dtype=float).reshape(system.n_dofs, -1)

@@ -107,7 +107,7 @@ def run_case(case: Case, out_dir: Path, mesh_size_mm: float | None = None,
         console.progress("dynamic loading: cutting + chip evacuation, Newmark average acceleration")
         hist = fe.solve_transient(system, bc, patch.patterns, amplitudes, times,
                                   damping=(case.analysis.rayleigh_alpha_per_s, case.analysis.rayleigh_beta_s),
-                                  keep=keep, observe=observe, console=console)
+                                  keep=keep, observe=observe, quasi_static=True, console=console)
         kept, linear_solver, amplification = hist.fields, hist.solver, hist.quasi_static
     else:
         console.progress("dynamic loading: cutting + chip evacuation, quasi-static (no inertia)")
