@@ -27,11 +27,13 @@ reaches 1M DOFs in seconds.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import shlex
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -59,8 +61,9 @@ def tetrahedralise(surface: Path, edge: float, epsilon: float):
         if triangles < surf.n_cells:  # TetWild's time follows the input's triangle count
             surf = surf.decimate_pro(1 - triangles / surf.n_cells, preserve_topology=True).clean().triangulate()
         start = time.perf_counter()
-        points, tets = pytetwild.tetrahedralize(np.asarray(surf.points, float), surf.faces.reshape(-1, 4)[:, 1:],
-                                                edge_length_abs=edge, epsilon=epsilon)
+        with tempfile.TemporaryDirectory() as scratch, contextlib.chdir(scratch):  # fTetWild's debug STLs
+            points, tets = pytetwild.tetrahedralize(np.asarray(surf.points, float), surf.faces.reshape(-1, 4)[:, 1:],
+                                                    edge_length_abs=edge, epsilon=epsilon)
         print(f"  TetWild {edge:g} mm: {len(tets):,} tets in {time.perf_counter() - start:.0f} s", file=sys.stderr)
         CACHE.mkdir(parents=True, exist_ok=True)
         np.savez(path, points=points, tets=tets, surface=np.asarray(surf.points))
