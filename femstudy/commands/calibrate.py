@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import argparse
 import re
-import tomllib
 from pathlib import Path
 
+from femstudy.commands.metadata import add_metadata_options, parse_settings
 from femstudy.errors import UserError, require
 
 FIGURES = ("fits.png", "power_law.png", "validation.png", "normality.png", "ann_neurons.png")
@@ -28,30 +28,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="held-out recordings (e.g. at other conditions); default: --holdout replicates")
     p.add_argument("--holdout", type=int, default=2,
                    help="replicates held out per condition when no --validate is given (2)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="metadata for every recording, e.g. --set spindle_rpm=1500 (TOML value)")
-    p.add_argument("--override", action="store_true",
-                   help="let --set values win over a recording's header when they disagree")
+    add_metadata_options(p, "every recording")
     p.add_argument("--cutoff-hz", type=float, help="low-pass cut-off [Hz] (default from the feed, Table 4-4)")
     p.add_argument("--no-ann", action="store_true", help="skip the neural-network neuron study")
     p.add_argument("--no-figures", action="store_true", help="write tables only")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
-
-
-def parse_settings(items: list[str]) -> dict:
-    """``KEY=VALUE`` pairs; VALUE is read as TOML (1.5, "text", true), else kept as text."""
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        require(sep and re.fullmatch(r"[A-Za-z_][A-Za-z0-9_\-]*", key),
-                f"--set expects KEY=VALUE with a metadata key such as feed_mm_s, got '{item}'")
-        try:
-            out[key] = tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            out[key] = value.strip()
-    return out
 
 
 def recording_paths(items: list[Path], option: str) -> list[Path]:

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import tomllib
 from pathlib import Path
 
+from femstudy.commands.metadata import add_metadata_options, parse_settings
 from femstudy.errors import require
 
 
@@ -28,29 +28,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="bone set for --model and for the friction reading of chip clogging (bovine)")
     p.add_argument("--cortex-mm", type=float,
                    help="cortical thickness [mm] (default: header cortex_mm, else from the breakthrough)")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="recording metadata, e.g. --set spindle_rpm=1500 (TOML value)")
-    p.add_argument("--override", action="store_true",
-                   help="let --set values win over the recording's header when they disagree")
+    add_metadata_options(p, "the recording")
     p.add_argument("--json", type=Path, metavar="OUT.json", help="write the diagnosis as JSON")
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write report.md, overlay.png, residuals.png and diagnosis.json to DIR")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the overlay and residual figure")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
-
-
-def parse_settings(items: list[str]) -> dict:
-    """``KEY=VALUE`` pairs with TOML values (bare words are taken as text)."""
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        require(bool(sep and key.strip()), f"--set expects KEY=VALUE, got '{item}'")
-        try:
-            out[key.strip()] = tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
-            out[key.strip()] = value.strip()
-    return out
 
 
 def run(args: argparse.Namespace) -> int:
