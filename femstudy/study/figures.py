@@ -50,26 +50,20 @@ def write_figures(folder: Path, title: str, results: list[LoadingResult]) -> lis
     _save(fig, folder / "loads.png")
     written.append("loads.png")
 
-    fig, ax = plt.subplots(figsize=(7.5, 4.5), constrained_layout=True)
-    _panel(ax, results, "max_deflection_mm", "deflection [mm]", suffix=", maximum")
-    for r in results:
-        ax.plot(r.time_s, r.drill_point_deflection_mm, ls="--", color=STYLE[r.name]["color"],
-                label=STYLE[r.name]["label"] + ", at drill point")
-    ax.legend(fontsize=8, loc="upper left")
-    ax.set_xlabel("time after contact [s]")
-    ax.set_title(f"{title}: deflection (displacement magnitude)")
-    _save(fig, folder / "deflection.png")
-    written.append("deflection.png")
-
-    fig, ax = plt.subplots(figsize=(7.5, 4.5), constrained_layout=True)
-    _panel(ax, results, "max_von_mises_MPa", "von Mises stress [MPa]", suffix=", maximum")
-    for r in results:
-        ax.plot(r.time_s, r.max_von_mises_excl_MPa, ls="--", color=STYLE[r.name]["color"],
-                label=STYLE[r.name]["label"] + ", outside load-patch zone")
-    ax.legend(fontsize=8, loc="upper left")
-    ax.set_xlabel("time after contact [s]")
-    ax.set_title(f"{title}: maximum von Mises stress")
-    _save(fig, folder / "von_mises.png")
-    written.append("von_mises.png")
+    for key, dashed, axis_label, dashed_label, what, name in (
+            ("max_deflection_mm", "drill_point_deflection_mm", "deflection [mm]", "at drill point",
+             "deflection (displacement magnitude)", "deflection.png"),
+            ("max_von_mises_MPa", "max_von_mises_excl_MPa", "von Mises stress [MPa]", "outside load-patch zone",
+             "maximum von Mises stress", "von_mises.png")):
+        fig, ax = plt.subplots(figsize=(7.5, 4.5), constrained_layout=True)
+        _panel(ax, results, key, axis_label, suffix=", maximum")
+        for r in results:
+            ax.plot(r.time_s, getattr(r, dashed), ls="--", color=STYLE[r.name]["color"],
+                    label=f"{STYLE[r.name]['label']}, {dashed_label}")
+        ax.legend(fontsize=8, loc="upper left")
+        ax.set_xlabel("time after contact [s]")
+        ax.set_title(f"{title}: {what}")
+        _save(fig, folder / name)
+        written.append(name)
     plt.close("all")
     return written
