@@ -43,8 +43,8 @@ def main() -> None:
     t_solve = time.perf_counter() - t0
     arrays = {"u": result} if args.analysis == "static" else result
     with atomic_path(args.out) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, t_setup=t_setup, t_solve=t_solve, n_dofs=system.basis.N, **arrays)
-    print(f"femstudy {args.analysis} ({args.fe}): {system.basis.N} DOFs, setup {t_setup:.2f} s, "
+        np.savez(fh, t_setup=t_setup, t_solve=t_solve, n_dofs=system.n_dofs, **arrays)
+    print(f"femstudy {args.analysis} ({args.fe}): {system.n_dofs} DOFs, setup {t_setup:.2f} s, "
           f"solve {t_solve:.2f} s")
 
 

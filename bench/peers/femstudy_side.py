@@ -10,7 +10,7 @@ The FE module is chosen by name: ``"femstudy"`` is :mod:`femstudy.fe`, ``"standi
 scikit-fem stand-in :mod:`bench.peers.standin` with the same interface. Only this file
 touches the solver's objects, and only these names: ``assemble``, ``drill_patch``, ``clamp``,
 ``solve_static``, ``solve_transient(system, bc, patterns, amplitudes, times_s, keep=,
-observe=)``; ``system.nodes/cells/region``, ``patch.thrust/torque/patterns``, ``bc.fixed``,
+observe=)``; ``system.nodes/cells/region/n_dofs``, ``patch.thrust/torque/patterns``, ``bc.fixed``,
 ``result.time_s/summary["max_deflection_mm"]/fields``.
 """
 
