@@ -97,14 +97,27 @@ def section_centre(points: np.ndarray, faces: np.ndarray, frame: Frame, fraction
     return np.average(np.array(mids), axis=0, weights=weights)
 
 
+#: A drill enters the bone from the side: its direction must be at least this far from the long axis.
+MIN_ANGLE_TO_AXIS_DEG = 30.0
+
+
+def drill_side(frame: Frame, site) -> np.ndarray:
+    """The unit direction across the long axis from which ``site.direction`` approaches the
+    bone; refuses directions within :data:`MIN_ANGLE_TO_AXIS_DEG` of the axis (they would
+    drill along the shaft, and a near-axial vector would otherwise pick an arbitrary side)."""
+    d = frame.direction(site.direction)
+    angle = np.degrees(np.arccos(min(1.0, abs(float(d @ frame.up)))))
+    if angle < MIN_ANGLE_TO_AXIS_DEG:
+        raise UserError(f"site.direction is {angle:.0f} degrees from the femur's long axis: the drill must enter "
+                        f"from the side, at least {MIN_ANGLE_TO_AXIS_DEG:g} degrees from the axis")
+    side = d - (d @ frame.up) * frame.up
+    return side / np.linalg.norm(side)
+
+
 def entry_point(tri: np.ndarray, frame: Frame, site, centre: np.ndarray) -> tuple[np.ndarray, int]:
     """Where a ray from outside, on the side named by ``site.direction``, towards ``centre``
     first meets the surface triangles ``tri`` (k, 3, 3); returns the point and the triangle."""
-    side = frame.direction(site.direction)
-    side = side - (side @ frame.up) * frame.up
-    if np.linalg.norm(side) < 1e-6:
-        raise UserError("site.direction must not be parallel to the long axis")
-    side /= np.linalg.norm(side)
+    side = drill_side(frame, site)
     start = centre + side * frame.length_mm
     t = _ray_triangle(start, -side, tri)
     if not np.isfinite(t).any():

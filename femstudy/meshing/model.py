@@ -133,6 +133,7 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     console.progress(f"surface: {len(raw.triangles)} triangles, units {frame.units} "
                      f"(x{frame.scale_to_mm:g} to mm), {frame.side} femur, length {frame.length_mm:.1f} mm"
                      + (f"; overridden: {', '.join(frame.overridden)}" if frame.overridden else ""))
+    landmarks.drill_side(frame, case.site)  # refuse a bad drill direction before TetWild runs
     for note in raw.repairs:
         console.progress(f"repaired: {note}")
     surf_mm = raw.scaled(frame.scale_to_mm)
