@@ -109,8 +109,9 @@ def plots(folder: Path, rows: list[dict], assessment: dict) -> list[str]:
             for (order, refine), group in groups(rows).items():
                 pts = sorted((r[x_key], r[quantity]) for r in group if r[quantity] is not None)
                 ax.plot(*zip(*pts), marker="o", label=f"P{order}, {refine}")
-                extrapolated = assessment[f"P{order}-{refine}"]["quantities"].get(quantity, {}).get("extrapolated")
-                if extrapolated is not None:
+                verdict = assessment[f"P{order}-{refine}"]["quantities"].get(quantity, {})
+                extrapolated = verdict.get("extrapolated")
+                if extrapolated is not None and verdict.get("verdict") != "not converging":
                     ax.axhline(extrapolated, ls=":", lw=1, color=ax.lines[-1].get_color())
             ax.set_xscale("log")
             if x_key == "size_mm":
@@ -119,7 +120,7 @@ def plots(folder: Path, rows: list[dict], assessment: dict) -> list[str]:
             ax.set_ylabel(quantity.replace("_mm", " [mm]").replace("_MPa", " [MPa]").replace("_", " "))
             ax.grid(True, which="both", alpha=0.3)
             ax.legend(fontsize=8)
-        fig.suptitle("Mesh convergence (dotted: Richardson-extrapolated value)")
+        fig.suptitle("Mesh convergence (dotted: Richardson-extrapolated value, where converging)")
         with atomic.atomic_path(folder / name) as tmp:
             fig.savefig(tmp, dpi=120, format="png")
         plt.close(fig)
