@@ -63,6 +63,15 @@ def test_calibrate_recovers_the_generating_friction_and_saves_a_usable_bone_set(
                     env={"FEMSTUDY_BONES": str(bone_library)})
     assert loads.returncode == 0, loads.stderr
     assert "bone set 'testbone'" in loads.stdout and "inside its calibrated range" in loads.stdout
+    # and a study case naming it takes its friction at a calibrated condition
+    from femstudy.casefile import load_case
+    from femstudy.study.loading import case_loading
+
+    case_file = tmp_path / "case.toml"
+    case_file.write_text('name = "own-bone"\n[drilling]\nbone = "testbone"\nfeed_mm_s = 1.5\nspindle_rpm = 1250\n')
+    friction = case_loading(load_case(case_file), 6.0).conditions.friction
+    c = conditions[(1.5, 1250.0)]
+    assert friction == pytest.approx((float(c["mu_f"]), float(c["mu_w"])), rel=0.05)
 
 
 def test_held_out_replicates_when_no_validation_runs_are_given(small_dataset, tmp_path, bone_library, capsys):
