@@ -50,7 +50,8 @@ def run_report(summary: dict) -> str:
     lines += ["", f"Peak loads: dynamic {load['peak_thrust_N']:.1f} N / {load['peak_torque_Nmm']:.1f} N·mm, "
                   f"static {load['static_thrust_N']:.1f} N / {load['static_torque_Nmm']:.1f} N·mm.", ""]
     lines += ["**Margin to failure** (strength / peak von Mises under the dynamic loading; the peak under "
-              "the patch is mesh-dependent, the one outside the exclusion zone is the converged measure):", "",
+              "the patch grows under mesh refinement, the one outside the exclusion zone is bounded; "
+              "docs/convergence.md gives the mesh sensitivity of both):", "",
               "| region | peak von Mises [MPa] | strength [MPa] | safety factor |", "|---|---|---|---|"]
     for region, m in summary["margins"]["dynamic"].items():
         kind = "yield" if "yield_MPa" in m else "ultimate"
@@ -124,7 +125,8 @@ Why the numbers differ from the thesis's Tables 5-14/5-15:
   continuum has unbounded local displacement and stress, so its "maximum" depends on the mesh. femstudy
   spreads the thrust over the drill footprint (Ø 2.7 mm) and the torque as a shear growing with radius.
   The peak stress under the patch is finite but mesh-sensitive (its convergence is assessed by
-  `femstudy sweep`); the stress outside the exclusion radius is the converged measure. The thesis's
+  `femstudy sweep`); the stress outside the exclusion radius is bounded and the measure to quote,
+  with its mesh sensitivity (a few per cent between the finest meshes, docs/convergence.md). The thesis's
   proximal and distal stresses (0.31 and 0.19 MPa against 21.8 MPa at mid-diaphysis, under the same loads)
   cannot be peaks under the drill point and were presumably read elsewhere.
 - **Element order and size.** 22 mm elements cannot resolve a drill-sized load. femstudy uses P2
