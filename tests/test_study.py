@@ -29,14 +29,16 @@ step_s = {step}
 [analysis]
 modes = 2
 [output]
+fields = {fields}
 fields_every = 2
 screenshot = {screenshot}
 """
 
 
-def run(tmp_path, mesh_cache, monkeypatch, order=2, scale=1.0, step=0.5, screenshot="true", name="run"):
+def run(tmp_path, mesh_cache, monkeypatch, order=2, scale=1.0, step=0.5, screenshot="true", name="run",
+        fields="true"):
     monkeypatch.setenv("FEMSTUDY_CACHE", str(mesh_cache))
-    case = parse_case(CASE.format(order=order, scale=scale, step=step, screenshot=screenshot))
+    case = parse_case(CASE.format(order=order, scale=scale, step=step, screenshot=screenshot, fields=fields))
     out = tmp_path / name
     return run_case(case, out, console=Console(quiet=True)), out
 
@@ -118,7 +120,7 @@ def test_interrupted_run_never_leaves_a_complete_looking_folder(tmp_path, mesh_c
     """kill -9 at several moments: results/<name> is either absent or complete; the next run
     succeeds and reuses the cached mesh."""
     case = tmp_path / "e2e.toml"
-    case.write_text(CASE.format(order=2, scale=1.0, step=0.5, screenshot="true"))
+    case.write_text(CASE.format(order=2, scale=1.0, step=0.5, screenshot="true", fields="true"))
     env = {**os.environ, "FEMSTUDY_CACHE": str(mesh_cache), "MPLBACKEND": "Agg"}
     out = tmp_path / "results" / "e2e"
     for delay in (1.0, 4.0, 8.0):
@@ -159,3 +161,10 @@ def test_combined_study_table_sits_beside_the_thesis(p2_run, tmp_path):
     load = summary["loading"]
     assert f"{load['peak_thrust_N'] / load['static_thrust_N']:.2f}x the static Allotta thrust" in text
     assert json.loads((tmp_path / "study.json").read_text())[1]["site"] == "subtrochanteric"
+
+
+def test_picture_without_fields_and_report_lists_what_exists(tmp_path, mesh_cache, monkeypatch):
+    _, out = run(tmp_path, mesh_cache, monkeypatch, order=1, step=1.0, fields="false")
+    assert (out / "femur.png").stat().st_size > 10_000 and not (out / "fields").exists()
+    text = (out / "report.md").read_text()
+    assert "femur.png" in text and "Fields for ParaView" not in text

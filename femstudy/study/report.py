@@ -73,9 +73,10 @@ def run_report(summary: dict) -> str:
                         f"{modal['dynamic_amplification']:.4f}."]
     lines += ["", f"Solved with {solver['linear_solver']} in {summary['timings']['total_s']:.1f} s "
                   f"(mesh {summary['timings']['mesh_s']:.1f} s"
-                  f"{', cached' if mesh.get('cache_hit') else ''}). Figures: loads.png, deflection.png, "
-                  "von_mises.png, femur.png. Fields for ParaView: fields/dynamic.pvd and fields/static.pvd "
-                  "(`femstudy view` shows them).", ""]
+                  f"{', cached' if mesh.get('cache_hit') else ''})."
+                  + (f" Figures: {', '.join(figures)}." if (figures := summary.get('figures', {}).get('files')) else "")
+                  + (f" Fields for ParaView: {' and '.join(fields)} (`femstudy view` shows them)."
+                     if (fields := summary.get('figures', {}).get('fields')) else ""), ""]
     return "\n".join(lines)
 
 
@@ -100,9 +101,22 @@ def study_table(summaries: list[dict]) -> str:
 
 def study_discussion(summaries: list[dict]) -> str:
     """Why the numbers differ from the thesis's Tables 5-14/5-15, with this study's load ratios."""
-    load = summaries[0]["loading"]
-    thrust_ratio = load["peak_thrust_N"] / load["static_thrust_N"]
-    torque_ratio = load["peak_torque_Nmm"] / load["static_torque_Nmm"]
+    def ratio(a, b):
+        return f"{a / b:.2f}x" if b > 0 else "undefined (no static load)"
+
+    def load_sentence(load):
+        return (f"the chip-clogging thrust at breakthrough is {ratio(load['peak_thrust_N'], load['static_thrust_N'])} "
+                f"the static Allotta thrust ({load['peak_thrust_N']:.1f} N against {load['static_thrust_N']:.1f} N) "
+                f"and the torque {ratio(load['peak_torque_Nmm'], load['static_torque_Nmm'])} "
+                f"({load['peak_torque_Nmm']:.1f} against {load['static_torque_Nmm']:.1f} N·mm)")
+
+    keys = ("peak_thrust_N", "static_thrust_N", "peak_torque_Nmm", "static_torque_Nmm")
+    loads = [s["loading"] for s in summaries]
+    if all(all(abs(l[k] - loads[0][k]) <= 1e-9 * max(1.0, abs(loads[0][k])) for k in keys) for l in loads):
+        load_text = f"Here {load_sentence(loads[0])}."
+    else:
+        load_text = "The loads differ between cases: " + "; ".join(
+            f"{s['case']['name']}: {load_sentence(s['loading'])}" for s in summaries) + "."
     periods = [s["modal"]["lowest_period_s"] for s in summaries if s.get("modal")]
     period = f"at most {1e3 * max(periods):.1f} ms" if periods else "a few ms on a femur"
     step = summaries[0]["case"]["time"]["step_s"]
@@ -110,11 +124,9 @@ def study_discussion(summaries: list[dict]) -> str:
 Why the numbers differ from the thesis's Tables 5-14/5-15:
 
 - **Loads.** The response is quasi-static (lowest natural period {period} against {step:g} s steps; see
-  each report's modal paragraph), so every dynamic/static ratio is a ratio of loads. Here the
-  chip-clogging thrust at breakthrough is {thrust_ratio:.2f}x the static Allotta thrust
-  ({load['peak_thrust_N']:.1f} N against {load['static_thrust_N']:.1f} N) and the torque {torque_ratio:.2f}x
-  ({load['peak_torque_Nmm']:.1f} against {load['static_torque_Nmm']:.1f} N·mm). Deflection follows the
-  thrust; the peak stress under the drill follows the torque's shear, so the two ratios differ. The thesis reports one ratio, 4.76, for both deflection and
+  each report's modal paragraph), so every dynamic/static ratio is a ratio of loads. {load_text}
+  Deflection follows the thrust; the peak stress under the drill follows the torque's shear, so the
+  two ratios differ. The thesis reports one ratio, 4.76, for both deflection and
   stress at every site, as if both loads had been scaled by one factor; its own calibrated clogging model
   does not grow that much over a 6 mm cortex at 2 mm/s and 1500 rpm, and its static Allotta load used
   specific cutting energies it does not state (docs/study.md).

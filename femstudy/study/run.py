@@ -68,9 +68,11 @@ def run_case(case: Case, out_dir: Path, mesh_size_mm: float | None = None,
     from femstudy.meshing import build_femur_model
 
     console = console or Console()
+    if mesh_size_mm is not None:  # so that summary.json echoes the size actually used
+        case = case.model_copy(update={"mesh": case.mesh.model_copy(update={"size_mm": float(mesh_size_mm)})})
     clock = {"start": time.perf_counter()}
     console.progress(f"case '{case.name}': building or loading the femur mesh")
-    model = build_femur_model(case, console=console, mesh_size_mm=mesh_size_mm)
+    model = build_femur_model(case, console=console)
     clock["mesh"] = time.perf_counter()
 
     loading = case_loading(case, model.site.cortical_thickness_mm)
@@ -95,7 +97,9 @@ def run_case(case: Case, out_dir: Path, mesh_size_mm: float | None = None,
                              np.full_like(times, loading.static_torque_Nmm), [static_row] * len(times), system)
     clock["static"] = time.perf_counter()
 
-    keep = _field_steps(len(times), case.output.fields_every) if case.output.fields else []
+    keep = set(_field_steps(len(times), case.output.fields_every)) if case.output.fields else set()
+    if case.output.screenshot:  # the picture shows the step of peak thrust (breakthrough)
+        keep.add(int(np.argmax(dyn.thrust_N)))
     rows: list[dict] = []
 
     def observe(n, t, u):  # per-step response; the summary columns come from `rows`
@@ -182,8 +186,9 @@ def _write(out_dir, case, model, system, summary, static, dynamic, u_static, kep
             summary["figures"]["files"] = figures.write_figures(tmp, case.name, [dynamic, static])
         base = fields.grid(system.nodes, system.cells, system.region, model.frame.up)
         if case.output.fields:
+            field_steps = set(_field_steps(len(times), case.output.fields_every))
             frames = [(float(times[n]), fields.with_solution(base, u, fe.von_mises_nodal(system, u), system.cells))
-                      for n, u in sorted(kept.items())]
+                      for n, u in sorted(kept.items()) if n in field_steps]
             fields.write_series(tmp / "fields", "dynamic", frames)
             static_grid = fields.with_solution(base, u_static, fe.von_mises_nodal(system, u_static), system.cells)
             fields.write_series(tmp / "fields", "static", [(0.0, static_grid)])
@@ -193,6 +198,8 @@ def _write(out_dir, case, model, system, summary, static, dynamic, u_static, kep
             g = fields.with_solution(base, kept[step], fe.von_mises_nodal(system, kept[step]), system.cells)
             render.deformed_picture(tmp / "femur.png", g, model.site.entry_point, model.site.direction, warp,
                                     f"{case.name}: dynamic loading, t = {times[step]:.2f} s")
+            summary["figures"].setdefault("files", []).append("femur.png")
+        summary["figures"]["fields"] = ["fields/dynamic.pvd", "fields/static.pvd"] if case.output.fields else []
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
         (tmp / "report.md").write_text(report.run_report(summary))
 
