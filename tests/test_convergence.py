@@ -77,3 +77,9 @@ def test_slow_order_on_a_singular_peak_is_not_convergence():
     a = assess("max_von_mises_MPa", [2.024, 2.412, 3.032], [60.348, 53.122, 42.162], expected_order=2,
                singular_hint=True)
     assert a.verdict == "not converging" and "singular" in a.reason
+
+
+def test_equal_finest_values_with_a_different_coarse_one_is_not_an_order():
+    a = assess("q", [1.0, 1.5, 2.25], [1.0, 1.0, 1.2], expected_order=2)
+    assert a.verdict == "not converging" and a.observed_order is None
+    assert coarsest_meeting_target([1.0, 2.0], [0.0, 0.0], 0.0, 0.02) is None  # an unloaded bone

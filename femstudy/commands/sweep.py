@@ -41,6 +41,8 @@ def run(args: argparse.Namespace) -> int:
     require(0 < args.target < 1, f"--target is a relative error in (0, 1), got {args.target}")
     try:
         is_sweep_file = "case" in tomllib.loads(args.file.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read {args.file}: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{args.file}: TOML syntax error: {exc}") from None
     if is_sweep_file:
@@ -51,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _execute(args, points, case, case_path, folder, runs=None):
+    import hashlib
+
     from femstudy.console import Console
     from femstudy.sweep import points as point_functions
     from femstudy.sweep.execute import execute
@@ -62,8 +66,11 @@ def _execute(args, points, case, case_path, folder, runs=None):
     memory = None
     if args.workers > 1 or args.scheduler:  # workers then read the meshes built here
         memory = _mesh_first(points, case, console)
-    return execute(points, folder / "points", point_functions.evaluate,
-                   (text, str(case_path), runs, str(cache_root().resolve())),
+    # finished points are reused only for the same case text: editing the case starts afresh
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    return execute(points, folder / f"points-{digest}", point_functions.evaluate,
+                   (text, str(Path(case_path).resolve()), runs and str(Path(runs).resolve()),
+                    str(cache_root().resolve())),
                    workers=args.workers, scheduler=args.scheduler, memory_bytes=memory, console=console)
 
 

@@ -103,6 +103,9 @@ def assess(quantity: str, h, values, expected_order: float, singular_hint: bool 
         if singular_hint and R >= bound:
             reason += "; a peak stress at the load-patch edge is singular in the continuum and grows as h → 0"
         return Assessment(**base, extrapolated=None, gci_fine=None, verdict="not converging", reason=reason)
+    if p is None:
+        return Assessment(**base, extrapolated=None, gci_fine=None, verdict="not converging",
+                          reason="no observed order: the two finest values are equal but the coarser one differs")
     r21 = hh[1] / hh[0]
     extrapolated = (r21 ** p * f1 - f2) / (r21 ** p - 1)
     gci = SAFETY_FACTOR * abs((f1 - f2) / f1) / (r21 ** p - 1) if f1 != 0 else None
@@ -119,6 +122,8 @@ def coarsest_meeting_target(h, values, reference: float, target: float):
     """Largest h whose value is within ``target`` (relative) of ``reference``, with its error;
     finer meshes must all meet the target too (the error must stay below it)."""
     pairs = sorted(zip(h, values))  # fine to coarse
+    if reference == 0:
+        return None
     best = None
     for size, value in pairs:
         error = abs(value - reference) / abs(reference)

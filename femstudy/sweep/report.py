@@ -62,7 +62,7 @@ def convergence(rows: list[dict], target: float) -> dict:
                 a = assess(quantity, h, values, expected_order=p2 if order == 2 else p1, singular_hint=singular)
                 entry["quantities"][quantity] = a.as_dict()
             deflection = entry["quantities"].get("max_deflection_mm")
-            if deflection and deflection["extrapolated"] is not None:
+            if deflection and deflection["extrapolated"] is not None and deflection["verdict"] != "not converging":
                 best = coarsest_meeting_target([r["size_mm"] for r in group],
                                                [r["max_deflection_mm"] for r in group],
                                                deflection["extrapolated"], target)
