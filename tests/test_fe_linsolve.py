@@ -37,8 +37,8 @@ def test_every_available_method_solves_the_system(problem, method):
 
 def hide(monkeypatch, *packages):
     """Make ``linsolve`` believe the given packages are not installed."""
-    real = linsolve._module
-    monkeypatch.setattr(linsolve, "_module", lambda name: None if name in packages else real(name))
+    real = linsolve._installed
+    monkeypatch.setattr(linsolve, "_installed", lambda name: name not in packages and real(name))
 
 
 def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, capsys):
