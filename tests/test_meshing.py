@@ -183,14 +183,19 @@ def test_tlem2_detected_as_right_femur_in_mm(tlem2):
 
 # -- cache -------------------------------------------------------------------------------
 
-def test_cached_rebuild_skips_tetwild(builtin, cache_dir, monkeypatch):
-    case, first = builtin
+@pytest.fixture
+def forbid_tetwild(cache_dir, monkeypatch):
+    """Fail the test if TetWild runs; builds read the session cache."""
 
     def no_tetwild(*args, **kwargs):
-        raise AssertionError("TetWild ran although the mesh was cached")
+        raise AssertionError("TetWild ran although its mesh was cached")
 
     monkeypatch.setattr(tetra, "tetrahedralize", no_tetwild)
     monkeypatch.setenv("FEMSTUDY_CACHE", str(cache_dir))
+
+
+def test_cached_rebuild_skips_tetwild(builtin, forbid_tetwild):
+    case, first = builtin
     again = build_femur_model(case, mesh_size_mm=SIZE_MM)
     assert again.stats["cache_hit"] and not first.stats["cache_hit"]
     assert again.stats["cache_key"] == first.stats["cache_key"]
@@ -200,15 +205,9 @@ def test_cached_rebuild_skips_tetwild(builtin, cache_dir, monkeypatch):
     assert again.stats["load_or_build_seconds"] < 0.2 * first.stats["tetwild_seconds"]
 
 
-def test_another_drill_site_reuses_the_tetwild_stage(builtin, cache_dir, monkeypatch):
+def test_another_drill_site_reuses_the_tetwild_stage(builtin, forbid_tetwild):
     """Site refinement runs on the cached TetWild mesh: a new site costs no TetWild run."""
     _, first = builtin
-
-    def no_tetwild(*args, **kwargs):
-        raise AssertionError("TetWild ran although only the drill site changed")
-
-    monkeypatch.setattr(tetra, "tetrahedralize", no_tetwild)
-    monkeypatch.setenv("FEMSTUDY_CACHE", str(cache_dir))
     other = parse_case(CASE.replace("position = 0.5", "position = 0.3").replace('"anterior"', '"lateral"'))
     moved = build_femur_model(other, mesh_size_mm=SIZE_MM)
     assert not moved.stats["cache_hit"] and moved.stats["cache_key"] != first.stats["cache_key"]
