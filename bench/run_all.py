@@ -251,7 +251,7 @@ def report(rows: list[dict], args, command: str, started: str, load_before, load
              "max |u_femstudy| (transients: the largest of that for the final field over the surface "
              "nodes CalculiX writes and of the drill-point and surface-maximum deflection histories; "
              "CalculiX's transient max deflection is over those surface nodes too).", ""]
-    lines += versions() + [""]
+    lines += versions() + [""] + marches(rows, args) + [""]
     lines += ["| mesh size [mm] | DOFs | solver | analysis | wall time [s] | peak memory [MB] | ratio to femstudy "
               "| max deflection [mm] | difference |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -272,6 +272,19 @@ def report(rows: list[dict], args, command: str, started: str, load_before, load
             argv = [os.path.relpath(a, REPO) if a.startswith(str(REPO)) else a for a in run.argv]
             lines.append(f"- {run.label}, {run.analysis}: `{(env + ' ') if env else ''}{shlex.join(argv)}`")
     return "\n".join(lines) + "\n"
+
+
+def marches(rows: list[dict], args) -> list[str]:
+    """How femstudy's transient marched at each size (docs/solver.md, "The Krylov march")."""
+    out = []
+    for size in dict.fromkeys(r["size"] for r in rows):
+        result = args.work / f"{args.geometry}-{args.fe}-{size:g}mm" / "femstudy-transient.npz"
+        if result.exists():
+            with np.load(result) as d:
+                scheme = str(d["scheme"]) if "scheme" in d else "stepping"
+                vectors = int(d["krylov_vectors"]) if "krylov_vectors" in d else 0
+            out.append(f"{size:g} mm: {scheme}" + (f" on {vectors} Krylov vectors" if vectors else ""))
+    return ["femstudy's 30-step transient marched by " + "; ".join(out) + "."] if out else []
 
 
 def targets(rows: list[dict]) -> list[str]:

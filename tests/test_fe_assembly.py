@@ -5,6 +5,7 @@ import pickle
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 import skfem
 from skfem.helpers import dot
 from skfem.models.elasticity import lame_parameters, linear_elasticity
@@ -42,6 +43,24 @@ def test_matrices_equal_scikit_fem_forms(order):
     # round-off relative to the largest entry
     assert abs(system.K - K).max() < 1e-12 * abs(K).max()
     assert abs(system.M - M).max() < 1e-12 * abs(M).max()
+
+
+def test_per_element_stiffnesses_give_the_per_material_matrix():
+    """One D per element (a per-element cortical axis, element-by-element products) and one per
+    material (grouped matrix products) must assemble the same K."""
+    mesh = two_region_bar()
+    spec = MaterialsSpec(cortical_model="transversely_isotropic")
+    axis = np.array([1.0, 0.2, 0.1])
+    shared = assemble(mesh, spec, long_axis=axis)
+    per_element = assemble(mesh, spec, long_axis=np.tile(axis, (len(mesh.tets), 1)))
+    assert len(per_element.materials.D) > 16 >= len(shared.materials.D)
+    assert abs(per_element.K - shared.K).max() < 1e-12 * abs(shared.K).max()
+
+
+def test_mass_is_the_nodal_mass_times_identity_on_the_stiffness_pattern():
+    system = assemble(two_region_bar())
+    assert abs(system.M - sp.kron(system.M_nodes, sp.identity(3))).max() < 1e-15 * abs(system.M).max()
+    assert np.array_equal(system.K.indptr, system.M.indptr) and np.array_equal(system.K.indices, system.M.indices)
 
 
 def test_rigid_body_motion_costs_no_strain_energy_and_mass_is_right():

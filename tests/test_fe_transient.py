@@ -83,3 +83,28 @@ def test_step_check_and_time_grid_errors():
     bc = clamped_both_ends(system)
     with pytest.raises(UserError, match="uniform"):
         solve_transient(system, bc, np.zeros((system.n_dofs, 1)), np.zeros((3, 1)), [0.0, 0.1, 0.3])
+
+
+@pytest.mark.parametrize("damping, start", [((0.0, 0.0), "rest"), ((30.0, 1e-4), "displaced")])
+def test_krylov_march_reproduces_stepping_when_steps_are_long(model, damping, start):
+    """At the thesis's 0.1 s steps a few Krylov vectors carry the whole march: same fields as
+    stepping to 1e-9, Rayleigh damping and a displaced start included."""
+    system, bc, f, period = model
+    times = np.linspace(0.0, 3.0, 31)
+    load = (np.sin(times) ** 2)[:, None]
+    u0 = None if start == "rest" else 0.5 * solve_static(system, bc, f)
+    runs = {scheme: solve_transient(system, bc, f[:, None], load, times, damping=damping, u0=u0, keep=range(31),
+                                    scheme=scheme) for scheme in ("auto", "stepping")}
+    assert runs["auto"].scheme == "krylov" and runs["stepping"].scheme == "stepping"
+    assert runs["auto"].timings["krylov_vectors"] < 16 and runs["auto"].timings["krylov_residual"] <= 1e-9
+    scale = max(np.abs(u).max() for u in runs["stepping"].fields.values())
+    for n in range(31):
+        np.testing.assert_allclose(runs["auto"].fields[n], runs["stepping"].fields[n], rtol=0, atol=1e-9 * scale)
+
+
+def test_resolved_vibration_falls_back_to_stepping(model):
+    """With 20 steps per period the Krylov vectors do not converge: the march steps."""
+    system, bc, f, period = model
+    times = np.arange(61) * period / 20
+    history = solve_transient(system, bc, f[:, None], np.ones((61, 1)), times)
+    assert history.scheme == "stepping"

@@ -44,8 +44,9 @@ def main() -> None:
     arrays = {"u": result} if args.analysis == "static" else result
     with atomic_path(args.out) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, t_setup=t_setup, t_solve=t_solve, n_dofs=system.n_dofs, **arrays)
+    march = f", {result['scheme']} march" if args.analysis == "transient" else ""
     print(f"femstudy {args.analysis} ({args.fe}): {system.n_dofs} DOFs, setup {t_setup:.2f} s, "
-          f"solve {t_solve:.2f} s")
+          f"solve {t_solve:.2f} s{march}")
 
 
 if __name__ == "__main__":

@@ -106,7 +106,9 @@ def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
     return {"times_s": np.asarray(result.time_s), "drill_point_mm": result.summary["drill_point_mm"],
             "max_deflection_mm": result.summary["max_deflection_mm"],
             "surface_max_deflection_mm": result.summary["surface_max_deflection_mm"],
-            "u_final": result.fields[len(model.times_s) - 1]}
+            "u_final": result.fields[len(model.times_s) - 1],
+            "scheme": getattr(result, "scheme", "stepping"),  # the stand-in always steps
+            "krylov_vectors": getattr(result, "timings", {}).get("krylov_vectors", 0)}
 
 
 def build_peer_case(fe, model: Model) -> PeerCase:
