@@ -42,7 +42,7 @@ def mass_product(system, bc):
     def product(x_free: np.ndarray) -> np.ndarray:  # x_free (n_free,) or (n_free, k)
         full = np.zeros((system.n_dofs,) + x_free.shape[1:])
         full[bc.free] = x_free
-        nodal = full.reshape(len(system.M_nodes.indptr) - 1, -1)  # a node's 3 (× k) values per row
+        nodal = full.reshape(system.M_nodes.shape[0], -1)  # a node's 3 (× k) values per row
         return (system.M_nodes @ nodal).reshape(full.shape)[bc.free]
     return product
 

@@ -134,13 +134,13 @@ def solve_transient(system, bc, patterns, amplitudes, times_s, *, damping=(0.0, 
     march_start = time.perf_counter()
     reduction = None
     if scheme == "auto" and factor.method != "amg":
-        reduction = krylov_march(factor, lambda x: K @ x, mass, Pf, A, dt, damping, (u, v, a),
+        reduction = krylov_march(factor, K.dot, mass, Pf, A, dt, damping, (u, v, a),
                                  max_blocks=min(MAX_KRYLOV_BLOCKS, (len(t) - 1) // 6))
     if reduction is not None:
         basis, states = reduction["basis"], reduction.pop("states")
         states = ((basis @ y, basis @ vy) for y, vy, _ in states)
     else:
-        states = ((y, vy) for y, vy, _ in newmark(factor.solve, lambda x: K @ x, mass, (Pf @ A[n] for n in range(1, len(t))),
+        states = ((y, vy) for y, vy, _ in newmark(factor.solve, K.dot, mass, (Pf @ A[n] for n in range(1, len(t))),
                                                   dt, damping, (u, v, a)))
     qs_shapes = None
     if quasi_static:
