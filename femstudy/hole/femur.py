@@ -1,0 +1,135 @@
+"""Column tops, bottoms and regions of a local hole model, read off a global bone mesh.
+
+Every column is a ray parallel to the drill axis d through a disk vertex (x₁, x₂) of the
+local frame. Its top is the first crossing of the bone's outer surface (triangles
+``outer_faces``); its bottom the next crossing of any boundary triangle of the global mesh
+after the top (the canal wall, or the far surface) — a free surface — unless that lies
+deeper than ``depth_cap_mm`` below the top, in which case the column stops at the cap, a cut
+through still-solid bone (Möller & Trumbore 1997 ray–triangle intersection). A cell's region
+is the global mesh's region at its centroid; a centroid just outside the global mesh (the
+local top's chords cut under the global surface's facets) takes its closest global cell's,
+within ``region_tolerance_mm``. Units: mm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from femstudy.errors import UserError, require
+from femstudy.femur_model import TetMesh
+from femstudy.hole.frame import HoleFrame
+
+#: Rays per batch in the ray casts (bounds the (rays × triangles) temporaries).
+RAY_BATCH = 64
+
+
+def _boundary_faces(tets: np.ndarray) -> np.ndarray:
+    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
+    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return faces[counts[inverse.ravel()] == 1]
+
+
+def _crossings(origins: np.ndarray, direction: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(rays, triangles) distances along ``direction`` from each origin to each triangle (inf: missed)."""
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    p = np.cross(direction, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-14 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = origins[:, None, :] - tri[None, :, 0]
+    u = np.einsum("rtj,tj->rt", s, p) * inv
+    q = np.cross(s, e1[None])
+    v = (q @ direction) * inv
+    t = np.einsum("tj,rtj->rt", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
+    return np.where(hit, t, np.inf)
+
+
+@dataclass(frozen=True)
+class FemurColumns:
+    """Callables for :func:`femstudy.hole.mesh.hole_mesh` on one global mesh and frame."""
+
+    mesh: TetMesh
+    frame: HoleFrame
+    outer: np.ndarray
+    boundary: np.ndarray
+    depth_cap_mm: float
+    region_tolerance_mm: float
+
+    def _rays(self, xy: np.ndarray, faces: np.ndarray):
+        xy = np.asarray(xy, float)
+        lift = float(np.ptp(self.mesh.points, axis=0).max())
+        origins = self.frame.to_global(np.column_stack([xy, np.full(len(xy), -lift)]))
+        tri = self.mesh.points[faces]
+        local = self.frame.to_local(tri.reshape(-1, 3)).reshape(-1, 3, 3)
+        reach = np.hypot(local[..., 0], local[..., 1]).min(axis=1)
+        edge = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max(axis=1)
+        near = reach <= np.hypot(xy[:, 0], xy[:, 1]).max() + edge
+        return origins, tri[near], lift
+
+    def top(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) depth ζ of the outer surface on every column [mm]."""
+        origins, tri, lift = self._rays(xy, self.outer)
+        first = np.concatenate([_crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri).min(axis=1)
+                                for i in range(0, len(origins), RAY_BATCH)]) if len(tri) else np.full(len(origins), np.inf)
+        if not np.all(np.isfinite(first)):
+            raise UserError(f"{np.sum(~np.isfinite(first))} columns of the local model miss the bone's outer surface: "
+                            "the submodel radius reaches beyond the bone")
+        return first - lift
+
+    def bottom(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) depth of each column's bottom [mm] and (n,) True where it is a free surface."""
+        top = self.top(xy)
+        origins, tri, lift = self._rays(xy, self.boundary)
+        gap = 1e-6 * lift
+        exits = []
+        for i in range(0, len(origins), RAY_BATCH):
+            t = _crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri) - lift
+            exits.append(np.where(t > top[i:i + RAY_BATCH, None] + gap, t, np.inf).min(axis=1))
+        exit_depth = np.concatenate(exits)
+        free = exit_depth <= top + self.depth_cap_mm
+        return np.where(free, exit_depth, top + self.depth_cap_mm), free
+
+    def region(self, points: np.ndarray) -> np.ndarray:
+        """(n,) global region code at each point (0 farther than the tolerance from the mesh)."""
+        import pyvista as pv
+
+        grid = pv.UnstructuredGrid({pv.CellType.TETRA: self.mesh.tets}, self.mesh.points)
+        cell = np.asarray(grid.find_containing_cell(points), dtype=np.int64)
+        missed = np.flatnonzero(cell < 0)
+        if len(missed):
+            closest, nearest = grid.find_closest_cell(points[missed], return_closest_point=True)
+            near = np.linalg.norm(nearest - points[missed], axis=1) <= self.region_tolerance_mm
+            cell[missed] = np.where(near, closest, -1)
+        return np.where(cell >= 0, self.mesh.region[np.maximum(cell, 0)], 0)
+
+
+def femur_columns(mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, depth_cap_mm: float,
+                  region_tolerance_mm: float = 0.5) -> FemurColumns:
+    """Top, bottom and region callables of a local hole model on the global mesh ``mesh``.
+
+    Parameters
+    ----------
+    mesh : the global bone mesh (no hole)
+    outer_faces : (k, 3) point indices of its outer (periosteal) surface triangles
+    frame : the hole's frame (entry point on the outer surface, drill axis into the bone)
+    depth_cap_mm : deepest column below its top; a column still in bone there ends in a cut
+    region_tolerance_mm : how far outside the global mesh a cell centroid may lie and still
+        take its closest cell's region
+
+    Returns
+    -------
+    :class:`FemurColumns` with ``top``, ``bottom`` and ``region`` for :func:`~femstudy.hole.mesh.hole_mesh`
+
+    Example
+    -------
+    >>> columns = femur_columns(model.mesh, outer, HoleFrame.along(site.entry_point, site.direction), 12.0)  # doctest: +SKIP
+    >>> hole = hole_mesh(columns.frame, 2.7, 90.0, 8.0, tips, columns.top, columns.bottom, columns.region)  # doctest: +SKIP
+    """
+    require(depth_cap_mm > 0, f"the depth cap must be positive, got {depth_cap_mm} mm")
+    outer_faces = np.asarray(outer_faces, dtype=np.int64).reshape(-1, 3)
+    require(len(outer_faces) > 0, "the outer surface has no triangles")
+    return FemurColumns(mesh, frame, outer_faces, _boundary_faces(np.asarray(mesh.tets)), float(depth_cap_mm),
+                        float(region_tolerance_mm))

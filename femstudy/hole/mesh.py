@@ -1,0 +1,376 @@
+"""A column mesh around a drill axis whose holes advance through depth stations.
+
+Geometry (local frame of :mod:`femstudy.hole.frame`: r from the axis, depth ζ along d):
+
+* the 2-D disk r ≤ R_sub of :func:`femstudy.hole.rings.disk`, with a ring on the hole
+  circle r = R (the drill radius);
+* a column along d through every disk vertex, from the bone's top surface ζ_top (a
+  callable) to its bottom ζ_bottom (a callable that also says whether the bottom is a free
+  surface or a cut through still-solid bone);
+* layer surfaces ζ_j = s_j + c(r) + w(r)(ζ_top − ζ_top(0)), clipped to [ζ_top, ζ_bottom],
+  with c(r) = (R − r) cot(β/2) for r < R (0 outside) the drill-point cone of point angle β,
+  and w(r) a smooth step from 0 at r ≤ R to 1 at r ≥ 2R. Inside and on the hole circle the
+  layers are therefore exact cones and planes at depth s_j below the entry point; far from
+  the hole they follow the top surface. A station with its drill tip at depth t_k has its
+  wall–cone corner at s_k = t_k − l, l = R cot(β/2) the cone length (1.35 mm for Ø2.7 mm,
+  90°), and s_k is one of the layer offsets, so the station's hole (the cylinder r < R down
+  to the cone ζ = s_k + c(r)) is exactly a union of cells. The offsets inside the cone
+  region (s < 0) are those that put a layer's rim on a disk ring; the offsets s ≥ 0 are
+  graded from ``axial_mm`` at the top and at every station's corner to ``axial_max_mm``.
+  A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it.
+* every disk triangle × layer is a prism cut into three tetrahedra by the minimum-index rule
+  (:mod:`femstudy.hole.prisms`); coincident vertices of a column are merged first, so
+  collapsed cells drop out and the mesh stays conforming.
+
+A tetrahedron inside the hole circle between layers j and j+1 is drilled away from the first
+station with s_k ≥ s_{j+1} (its ``station`` label); the others are never drilled (−1).
+
+Boundary labels: ``hole_wall`` and ``hole_bottom`` (the exposed cone) per station; ``top``
+(the bone surface the drill enters), ``bottom_free`` (where the column leaves the bone),
+``cut_bottom`` (a capped bottom in solid bone), ``cut_lateral`` (r = R_sub) and ``void``
+(surfaces of cells the region callable marked empty).
+
+Units: mm.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from femstudy.errors import require
+from femstudy.femur_model import CORTICAL, TetMesh
+from femstudy.hole.frame import HoleFrame
+from femstudy.hole.prisms import split_prisms
+from femstudy.hole.rings import Disk, disk, graded_points
+from femstudy.meshing.tetra import orient, quality, signed_volumes
+
+log = logging.getLogger(__name__)
+
+LABELS = ("hole_wall", "hole_bottom", "top", "bottom_free", "cut_bottom", "cut_lateral", "void")
+#: Face labels on which a submodel takes the global model's displacements.
+CUT_LABELS = ("cut_bottom", "cut_lateral")
+
+
+@dataclass(frozen=True)
+class Resolution:
+    """Element sizes of the column mesh, with one knob for convergence studies.
+
+    refinement   : every length below is divided by it, the hole-circle vertex count and
+                   the number of elements per growth are multiplied by it (growth → growth^(1/refinement)),
+                   so refinement 1, 1.5, 2.25 is a ladder h, h/1.5, h/2.25
+    n_wall       : vertices on the hole circle at refinement 1 (rounded to a multiple of 4)
+    wall_mm      : radial ring spacing at the hole circle [mm]
+    growth       : spacing growth per element away from the hole circle, the top and the stations
+    axial_mm     : layer thickness at the top and at every station's cone [mm]
+    axial_max_mm : largest layer thickness [mm]
+    snap         : fraction of a layer spacing within which a vertex moves onto the top or bottom
+    """
+
+    refinement: float = 1.0
+    n_wall: int = 24
+    wall_mm: float = 0.3
+    growth: float = 1.35
+    axial_mm: float = 0.3
+    axial_max_mm: float = 0.8
+    snap: float = 0.45
+
+    def __post_init__(self) -> None:
+        require(self.refinement > 0 and self.n_wall >= 8 and self.wall_mm > 0 and self.growth >= 1
+                and 0 < self.axial_mm <= self.axial_max_mm and 0 <= self.snap < 0.5,
+                f"invalid hole-mesh resolution {self}")
+
+    @property
+    def scaled(self) -> dict:
+        """The sizes at this refinement: n_wall, wall_mm, growth, axial_mm, axial_max_mm."""
+        f = self.refinement
+        return {"n_wall": 4 * max(2, int(round(self.n_wall * f / 4))), "wall_mm": self.wall_mm / f,
+                "growth": self.growth ** (1.0 / f), "axial_mm": self.axial_mm / f,
+                "axial_max_mm": self.axial_max_mm / f}
+
+
+@dataclass(frozen=True)
+class HoleStation:
+    """The local model at one depth station.
+
+    index            : station number (−1: nothing drilled yet)
+    tip_depth_mm     : drill-tip depth below the entry point along d [mm] (NaN at −1)
+    corner_depth_mm  : depth of the wall–cone corner, tip − cone length [mm]
+    mesh             : the station's tetrahedra (points shared with the :class:`HoleMesh`)
+    faces            : label → (k, 3) point indices of the boundary faces (labels in :data:`LABELS`)
+    kept             : (n_tets of the HoleMesh,) True for the tetrahedra in this station
+    """
+
+    index: int
+    tip_depth_mm: float
+    corner_depth_mm: float
+    mesh: TetMesh
+    faces: dict
+    kept: np.ndarray
+    hole: "HoleMesh" = field(repr=False)
+
+    @property
+    def cut_faces(self) -> np.ndarray:
+        """(k, 3) faces where the submodel takes the global displacements."""
+        return np.concatenate([self.faces[name] for name in CUT_LABELS])
+
+
+@dataclass(frozen=True)
+class HoleMesh:
+    """A column mesh with depth stations; see the module docstring.
+
+    mesh              : every tetrahedron (nothing drilled), positively oriented
+    station           : (n_tets,) −1 never drilled, k drilled away from station k on
+    tip_depths_mm     : (K,) drill-tip depth of every station below the entry point [mm]
+    faces             : label → (k, 3) boundary faces of the undrilled mesh
+    in_hole           : (n_tets,) True for tetrahedra inside the hole circle
+    point_column      : (n_points,) the disk vertex (column) of every point
+    column_top_mm     : (n_columns,) ζ of the top surface on every column [mm]
+    layer_offsets_mm  : (L,) the layer offsets s_j [mm]
+    quality           : :func:`femstudy.meshing.tetra.quality` of ``mesh``
+    """
+
+    frame: HoleFrame
+    radius_mm: float
+    point_angle_deg: float
+    submodel_radius_mm: float
+    resolution: Resolution
+    mesh: TetMesh
+    station: np.ndarray
+    tip_depths_mm: np.ndarray
+    faces: dict
+    in_hole: np.ndarray
+    point_column: np.ndarray
+    column_top_mm: np.ndarray
+    layer_offsets_mm: np.ndarray
+    disk: Disk = field(repr=False)
+    quality: dict = field(default_factory=dict)
+
+    @property
+    def cone_length_mm(self) -> float:
+        """l = R cot(β/2) [mm]."""
+        return self.radius_mm / np.tan(np.radians(self.point_angle_deg) / 2)
+
+    @property
+    def point_top_depth(self) -> np.ndarray:
+        """(n_points,) ζ of the top surface on every point's column [mm]."""
+        return self.column_top_mm[self.point_column]
+
+    @property
+    def hole_top_mm(self) -> float:
+        """The highest top-surface depth on the hole circle [mm]: where the wall begins."""
+        return float(self.column_top_mm[self.disk.ring == self.disk.hole_ring].min())
+
+    @property
+    def n_stations(self) -> int:
+        return len(self.tip_depths_mm)
+
+    def at_station(self, k: int) -> HoleStation:
+        """The mesh and labelled faces with the hole drilled to station ``k`` (−1: undrilled).
+
+        Parameters
+        ----------
+        k : station index, −1 ≤ k < n_stations
+
+        Returns
+        -------
+        :class:`HoleStation`
+
+        Example
+        -------
+        >>> station = hole.at_station(0)  # doctest: +SKIP
+        >>> station.faces["hole_bottom"].shape  # doctest: +SKIP
+        (96, 3)
+        """
+        require(-1 <= k < self.n_stations, f"station {k} does not exist (0 to {self.n_stations - 1}, or −1)")
+        kept = (self.station < 0) | (self.station > k)
+        tets = self.mesh.tets[kept]
+        faces, owner = _boundary_faces(tets)
+        key = _face_keys(faces, len(self.mesh.points))
+        labels = {}
+        full_keys = {name: _face_keys(f, len(self.mesh.points)) for name, f in self.faces.items()}
+        interface = np.ones(len(faces), bool)
+        for name, keys in full_keys.items():
+            hit = np.isin(key, keys)
+            labels[name] = faces[hit]
+            interface &= ~hit
+        inside = self.in_hole[kept][owner]
+        labels["hole_wall"] = faces[interface & ~inside]
+        labels["hole_bottom"] = faces[interface & inside]
+        tip = float(self.tip_depths_mm[k]) if k >= 0 else float("nan")
+        return HoleStation(k, tip, tip - self.cone_length_mm, TetMesh(self.mesh.points, tets, self.mesh.region[kept]),
+                           labels, kept, self)
+
+    def removed_volume_mm3(self, k: int) -> float:
+        """Volume of the tetrahedra drilled away by station ``k`` [mm³]."""
+        gone = (self.station >= 0) & (self.station <= k)
+        return float(signed_volumes(self.mesh.points, self.mesh.tets[gone]).sum())
+
+    def summary(self) -> dict:
+        """Sizes and quality, JSON-ready."""
+        return {"n_points": self.mesh.n_points, "n_tets": self.mesh.n_tets, "n_stations": self.n_stations,
+                "n_wall": int(self.disk.ring_counts[self.disk.hole_ring]), "n_rings": len(self.disk.ring_radii),
+                "n_layers": len(self.layer_offsets_mm), "min_dihedral_deg": self.quality.get("min_dihedral_deg"),
+                "refinement": self.resolution.refinement}
+
+
+def _face_keys(faces: np.ndarray, n: int) -> np.ndarray:
+    s = np.sort(faces, axis=1).astype(np.int64)
+    return (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
+
+
+def _boundary_faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (k, 3) that belong to one tetrahedron only, and that tetrahedron."""
+    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
+    owner = np.tile(np.arange(len(tets)), 4)
+    key = _face_keys(faces, int(tets.max()) + 1)
+    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    once = first[counts == 1]
+    return faces[once], owner[once]
+
+
+def _blend(r: np.ndarray, R: float) -> np.ndarray:
+    """w(r): 0 for r ≤ R, 1 for r ≥ 2R, a cubic smooth step in between."""
+    t = np.clip((r - R) / R, 0.0, 1.0)
+    return t * t * (3 - 2 * t)
+
+
+def _layer_offsets(disk_: Disk, cot: float, corners: np.ndarray, s_max: float, sizes: dict) -> np.ndarray:
+    """s_j: the cone-region offsets −(R − r_i) cot(β/2) of the rings inside the hole, then
+    offsets graded from 0 to s_max with the station corners among them."""
+    R = disk_.ring_radii[disk_.hole_ring]
+    negative = -(R - disk_.ring_radii[:disk_.hole_ring]) * cot
+    refine_at = np.concatenate([[0.0], corners])
+    g, h0, h_max = sizes["growth"], sizes["axial_mm"], sizes["axial_max_mm"]
+
+    def size(s):
+        distance = np.abs(s[:, None] - refine_at[None, :]).min(axis=1)
+        return np.minimum(h_max, h0 + (g - 1.0) * distance)
+
+    fixed = np.unique(np.concatenate([[0.0, s_max], corners[(corners > 0) & (corners < s_max)]]))
+    return np.concatenate([negative, graded_points(fixed, size)])
+
+
+def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, submodel_radius_mm: float,
+              tip_depths_mm, top, bottom, region=None, resolution: Resolution = Resolution()) -> HoleMesh:
+    """Mesh the bone around a drill axis, with the hole at every station as a union of cells.
+
+    Parameters
+    ----------
+    frame : the hole's local frame (entry point o on the top surface, drill axis d)
+    diameter_mm : drill diameter D = 2R [mm]
+    point_angle_deg : drill point angle β [degrees]
+    submodel_radius_mm : R_sub, radius of the local model around the axis [mm]
+    tip_depths_mm : increasing drill-tip depths below o along d of the stations [mm]
+    top : callable, (n, 2) local (x₁, x₂) → (n,) ζ of the bone's top surface [mm]
+    bottom : callable, (n, 2) → ((n,) ζ of the column's bottom [mm], (n,) bool free surface)
+    region : callable, (n, 3) global points → (n,) region codes (0: empty, the cell is dropped);
+             default: all cortical
+    resolution : :class:`Resolution`
+
+    Returns
+    -------
+    :class:`HoleMesh`
+
+    Example
+    -------
+    >>> plate = hole_mesh(HoleFrame.along([0, 0, 0], [0, 0, 1]), 2.7, 90.0, 6.0, [2.0, 3.0],
+    ...                   top=lambda xy: np.zeros(len(xy)),
+    ...                   bottom=lambda xy: (np.full(len(xy), 2.5), np.ones(len(xy), bool)))
+    >>> plate.n_stations
+    2
+    """
+    R = diameter_mm / 2
+    require(diameter_mm > 0 and 0 < point_angle_deg < 180, f"drill Ø{diameter_mm} mm, point angle "
+                                                           f"{point_angle_deg}° is not a drill")
+    cot = 1.0 / np.tan(np.radians(point_angle_deg) / 2)
+    cone = R * cot
+    tips = np.atleast_1d(np.asarray(tip_depths_mm, float))
+    require(len(tips) >= 1 and np.all(tips > 0) and np.all(np.diff(tips) > 0),
+            f"station tip depths must be positive and increasing, got {tips.tolist()}")
+    corners = tips - cone
+    sizes = resolution.scaled
+    entry_rings = R + corners[corners < 0] / cot
+    d2 = disk(R, submodel_radius_mm, sizes["n_wall"], sizes["wall_mm"], sizes["growth"], entry_rings)
+
+    T = np.asarray(top(d2.xy), float)
+    B, free = bottom(d2.xy)
+    B, free = np.asarray(B, float), np.asarray(free, bool)
+    require(T.shape == B.shape == free.shape == (len(d2.xy),) and np.all(np.isfinite(T)) and np.all(np.isfinite(B)),
+            "the top and bottom callables must give one finite depth per column")
+    require(np.all(B > T), f"{np.sum(B <= T)} columns have no bone (bottom not below top) within "
+                           f"{submodel_radius_mm} mm of the drill axis")
+    w = _blend(d2.radius, R)
+    lift = w * (T - T[0])
+    s = _layer_offsets(d2, cot, corners, float(np.max(B - lift)), sizes)
+    c = np.maximum(R - d2.radius, 0.0) * cot
+    Z = np.clip(s[None, :] + (c + lift)[:, None], T[:, None], B[:, None])
+    spacing = np.diff(s)
+    snap = resolution.snap
+    below_top = Z - T[:, None] < snap * np.concatenate([[np.inf], spacing])[None, :]
+    above_bottom = B[:, None] - Z < snap * np.concatenate([spacing, [np.inf]])[None, :]
+    Z = np.where(below_top, T[:, None], np.where(above_bottom, B[:, None], Z))
+
+    tol = 1e-9 * max(1.0, float(np.abs(Z).max()))
+    new = np.concatenate([np.ones((len(Z), 1), bool), np.diff(Z, axis=1) > tol], axis=1)
+    local_id = np.cumsum(new, axis=1) - 1
+    per_column = local_id[:, -1] + 1
+    start = np.concatenate([[0], np.cumsum(per_column)[:-1]])
+    ids = start[:, None] + local_id
+    column = np.repeat(np.arange(len(Z)), per_column)
+    depth = Z[new]
+    points = frame.to_global(np.column_stack([d2.xy[column], depth]))
+
+    tri = d2.triangles
+    L = len(s)
+    lower = ids[tri][:, :, :-1].transpose(0, 2, 1).reshape(-1, 3)  # (triangle, layer) rows
+    upper = ids[tri][:, :, 1:].transpose(0, 2, 1).reshape(-1, 3)
+    cell_triangle = np.repeat(np.arange(len(tri)), L - 1)
+    cell_layer = np.tile(np.arange(L - 1), len(tri))
+    alive = (upper != lower).any(axis=1)
+    prisms = np.column_stack([lower, upper])[alive]
+    cell_triangle, cell_layer = cell_triangle[alive], cell_layer[alive]
+    tets, owner = split_prisms(prisms)
+    tets = orient(points, tets)
+    volume = signed_volumes(points, tets)
+    flat = volume <= 1e-12 * float(np.ptp(points, axis=0).max()) ** 3
+    require(not flat.any(), f"the column mesh has {flat.sum()} flat tetrahedra; the top and bottom surfaces "
+                            "vary too sharply between neighbouring columns for this resolution")
+
+    in_hole = d2.in_hole[cell_triangle[owner]]
+    after = s[cell_layer[owner] + 1]
+    first = np.searchsorted(corners, after - 1e-9 * max(1.0, cone), side="left")
+    station = np.where(in_hole & (first < len(corners)), first, -1)
+
+    centroids = points[tets].mean(axis=1)
+    codes = np.full(len(tets), CORTICAL, np.int8) if region is None else np.asarray(region(centroids)).astype(np.int8)
+    require(codes.shape == (len(tets),), "the region callable must give one code per point")
+    solid = codes != 0
+    tets, station, in_hole, codes = tets[solid], station[solid], in_hole[solid], codes[solid]
+    require(len(tets) > 0, "the region callable leaves no bone in the local model")
+
+    used = np.unique(tets)
+    renumber = np.full(len(points), -1)
+    renumber[used] = np.arange(len(used))
+    points, tets, column, depth = points[used], renumber[tets], column[used], depth[used]
+
+    faces, _ = _boundary_faces(tets)
+    on_top = np.abs(depth - T[column]) <= tol
+    on_bottom = np.abs(depth - B[column]) <= tol
+    lateral = d2.ring[column] == len(d2.ring_radii) - 1
+    labels = np.full(len(faces), "void", dtype=object)
+    all_of = lambda mask: mask[faces].all(axis=1)  # noqa: E731
+    labels[all_of(on_bottom)] = "cut_bottom"
+    labels[all_of(on_bottom) & all_of(free[column])] = "bottom_free"
+    labels[all_of(on_top)] = "top"
+    labels[all_of(lateral)] = "cut_lateral"
+    face_sets = {name: faces[labels == name] for name in LABELS if name not in ("hole_wall", "hole_bottom")}
+
+    mesh = TetMesh(points, tets, codes)
+    result = HoleMesh(frame, R, float(point_angle_deg), float(submodel_radius_mm), resolution, mesh, station, tips,
+                      face_sets, in_hole, column, T, s, d2, quality(mesh))
+    log.info("hole mesh: %d points, %d tets, %d stations, minimum dihedral %.1f°", mesh.n_points, mesh.n_tets,
+             len(tips), result.quality["min_dihedral_deg"])
+    return result
