@@ -127,6 +127,7 @@ class HoleLoads:
     evacuation_torque : 1 N·mm about d on the engaged wall, density ∝ exp(p ζ / D)
     evacuation_thrust : 1 N along d, on the cone or on the wall (``evacuation_thrust_on``)
     bottom_mean       : (3, n_dofs) sparse; ``bottom_mean @ u`` is the cone's mean displacement [mm]
+    engaged_length_mm : depth of the wall's lowest point below its highest [mm]
     """
 
     cutting_thrust: np.ndarray
@@ -212,7 +213,8 @@ def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_
     else:
         evacuation_thrust = wall.forces(_safe_inverse(np.einsum("fq,fq->", wall.w, density))
                                         * density[..., None] * d)
-    engaged = max(0.0, station.corner_depth_mm - hole.hole_top_mm)
+    wall_vertices = system.mesh.p.T[system.mesh.facets[:, wall.facets].ravel()]
+    engaged = float(((wall_vertices - o) @ d).max() - hole.hole_top_mm) if wall.area_mm2 > 0 else 0.0
     return HoleLoads(thrust, torque, evacuation_torque, evacuation_thrust, mean, d, o, centre, area,
                      wall.area_mm2, engaged, float(growth_exponent), evacuation_thrust_on)
 

@@ -17,7 +17,9 @@ Geometry (local frame of :mod:`femstudy.hole.frame`: r from the axis, depth ζ a
   to the cone ζ = s_k + c(r)) is exactly a union of cells. The offsets inside the cone
   region (s < 0) are those that put a layer's rim on a disk ring; the offsets s ≥ 0 are
   graded from ``axial_mm`` at the top and at every station's corner to ``axial_max_mm``.
-  A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it.
+  A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it,
+  except on a station's cone, which stays exact (a thin layer of bone under a cone that is
+  breaking through stays thin).
 * every disk triangle × layer is a prism cut into three tetrahedra by the minimum-index rule
   (:mod:`femstudy.hole.prisms`); coincident vertices of a column are merged first, so
   collapsed cells drop out and the mesh stays conforming.
@@ -200,7 +202,7 @@ class HoleMesh:
         labels["hole_wall"] = faces[interface & ~inside]
         labels["hole_bottom"] = faces[interface & inside]
         tip = float(self.tip_depths_mm[k]) if k >= 0 else float("nan")
-        return HoleStation(k, tip, tip - self.cone_length_mm, TetMesh(self.mesh.points, tets, self.mesh.region[kept]),
+        return HoleStation(k, tip, float(tip - self.cone_length_mm), TetMesh(self.mesh.points, tets, self.mesh.region[kept]),
                            labels, kept, self)
 
     def removed_volume_mm3(self, k: int) -> float:
@@ -311,6 +313,10 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     snap = resolution.snap
     below_top = Z - T[:, None] < snap * np.concatenate([[np.inf], spacing])[None, :]
     above_bottom = B[:, None] - Z < snap * np.concatenate([spacing, [np.inf]])[None, :]
+    hole_surface = (d2.radius[:, None] <= R) & np.isin(s, corners)[None, :]  # the drilled cones stay exact
+    below_top &= ~hole_surface
+    above_bottom &= ~hole_surface
+    below_top[:, 0] = above_bottom[:, -1] = True
     Z = np.where(below_top, T[:, None], np.where(above_bottom, B[:, None], Z))
 
     tol = 1e-9 * max(1.0, float(np.abs(Z).max()))

@@ -96,8 +96,8 @@ def _locate(system, points: np.ndarray):
         k = min(64, mesh.nelements)
         _, near = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T).query(points[retry], k)
         near = near.reshape(len(retry), k)
-        tries = [_reference_coordinates(system, near[:, j], points[retry])[2] for j in range(k)]
-        best = np.argmax(np.column_stack(tries), axis=1)
+        tries = _reference_coordinates(system, near.ravel(), np.repeat(points[retry], k, axis=0))[2]
+        best = np.argmax(tries.reshape(len(retry), k), axis=1)
         element[retry] = near[np.arange(len(retry)), best]
         xi[retry], invJ[retry], worst[retry] = _reference_coordinates(system, element[retry], points[retry])
     element[worst < -BOUNDARY_TOLERANCE] = -1

@@ -141,8 +141,8 @@ def disk(hole_radius_mm: float, outer_radius_mm: float, n_wall: int, wall_mm: fl
     hole_radius_mm : R_hole, the drill radius [mm]
     outer_radius_mm : R_sub, the disk's radius [mm]
     n_wall : vertices on the hole circle, a multiple of 4 (so 0°, 90°, ... are mid-way between two)
-    wall_mm : ring spacing next to the hole circle, on both sides [mm]
-    growth : the spacing grows as wall_mm + (growth − 1)·|r − R_hole| away from the circle
+    wall_mm : ring spacing at the hole circle and inside it [mm]
+    growth : outside the circle the spacing grows as wall_mm + (growth − 1)·(r − R_hole)
     inner_radii_mm : further radii inside the hole that must be rings [mm]
 
     Returns
@@ -161,7 +161,7 @@ def disk(hole_radius_mm: float, outer_radius_mm: float, n_wall: int, wall_mm: fl
     require(wall_mm > 0 and growth >= 1, f"ring spacing {wall_mm} mm and growth {growth} must be positive and ≥ 1")
 
     def size(r):
-        return wall_mm + (growth - 1.0) * np.abs(r - R)
+        return wall_mm + (growth - 1.0) * np.maximum(r - R, 0.0)
 
     extra = np.asarray(inner_radii_mm, float)
     require(np.all((extra > 0) & (extra < R)), "extra ring radii must lie strictly inside the hole")

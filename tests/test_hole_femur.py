@@ -1,0 +1,96 @@
+"""Column tops, bottoms and regions by ray casting on a global mesh: a hollow tube drilled
+radially, the femoral shaft's simplest stand-in, where every depth is known exactly."""
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+
+from hole_cases import CONE, DIAMETER, POINT_ANGLE, RADIUS
+from femstudy.errors import UserError
+from femstudy.fe.geometry import tube_mesh
+from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL, TetMesh
+from femstudy.hole import HoleFrame, hole_mesh
+from femstudy.hole.femur import femur_columns
+from femstudy.meshing.tetra import signed_volumes
+
+R_OUT, R_IN, N_AROUND = 14.0, 6.5, 96
+#: a 96-gon's chords lie up to R(1 − cos(π/96)) = 7.5 µm inside the outer circle (radially)
+FACETING = R_OUT * (1 - np.cos(np.pi / N_AROUND))
+
+
+@lru_cache(maxsize=None)
+def tube():
+    mesh = tube_mesh(60.0, R_OUT, R_IN, 3, N_AROUND, 30)
+    centroid = mesh.points[mesh.tets].mean(axis=1)
+    region = np.where(centroid[:, 2] > 30.0, CORTICAL, CANCELLOUS_DISTAL).astype(np.int8)  # two regions
+    mesh = TetMesh(mesh.points, mesh.tets, region)
+    faces = np.concatenate([mesh.tets[:, [1, 2, 3]], mesh.tets[:, [0, 3, 2]], mesh.tets[:, [0, 1, 3]],
+                            mesh.tets[:, [0, 2, 1]]])
+    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    boundary = faces[counts[inverse.ravel()] == 1]
+    outer = boundary[np.hypot(*mesh.points[boundary].mean(axis=1)[:, :2].T) > (R_OUT + R_IN) / 2]
+    return mesh, outer
+
+
+def frame():
+    """Entering the top of the tube (a vertex of its 96-gon) at mid-length, drilling along −y."""
+    return HoleFrame.along([0.0, R_OUT, 30.0], [0.0, -1.0, 0.0])
+
+
+def lateral_offset(columns, xy):
+    """Distance of each column from the tube's yz plane (its global x) [mm]."""
+    return np.abs(columns.frame.to_global(np.column_stack([xy, np.zeros(len(xy))]))[:, 0])
+
+
+def test_columns_meet_the_outer_surface_and_exit_into_the_canal():
+    mesh, outer = tube()
+    columns = femur_columns(mesh, outer, frame(), depth_cap_mm=20.0)
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-5.5, 5.5, (40, 2))
+    x = lateral_offset(columns, xy)
+    top = columns.top(xy)
+    slant = R_OUT / np.sqrt(R_OUT ** 2 - x ** 2)  # a radial sag seen along the ray
+    np.testing.assert_allclose(top, R_OUT - np.sqrt(R_OUT ** 2 - x ** 2), atol=FACETING * slant.max() + 1e-9)
+    bottom, free = columns.bottom(xy)
+    assert free.all()
+    inner_faceting = R_IN * (1 - np.cos(np.pi / N_AROUND)) * R_IN / np.sqrt(R_IN ** 2 - x ** 2)
+    np.testing.assert_allclose(bottom, R_OUT - np.sqrt(R_IN ** 2 - x ** 2), atol=inner_faceting.max() + 1e-9)
+
+
+def test_a_depth_cap_in_solid_bone_is_a_cut():
+    mesh, outer = tube()
+    columns = femur_columns(mesh, outer, frame(), depth_cap_mm=4.0)
+    xy = np.array([[0.0, 0.0], [2.0, 3.0]])
+    bottom, free = columns.bottom(xy)
+    assert not free.any()
+    np.testing.assert_allclose(bottom - columns.top(xy), 4.0, rtol=1e-12)
+
+
+def test_local_mesh_of_a_tube_wall():
+    mesh, outer = tube()
+    columns = femur_columns(mesh, outer, frame(), depth_cap_mm=20.0)
+    hole = hole_mesh(columns.frame, DIAMETER, POINT_ANGLE, 5.0, [3.0, 5.0, 9.5], columns.top, columns.bottom,
+                     columns.region)
+    assert signed_volumes(hole.mesh.points, hole.mesh.tets).min() > 0
+    assert set(np.unique(hole.mesh.region)) == {CORTICAL, CANCELLOUS_DISTAL}  # the global regions carried over
+    local = hole.frame.to_local(hole.mesh.points)
+    centroid = hole.mesh.points[hole.mesh.tets].mean(axis=1)
+    np.testing.assert_array_equal(hole.mesh.region == CORTICAL, centroid[:, 2] > 30.0)
+    assert len(hole.faces["cut_bottom"]) == 0 and len(hole.faces["bottom_free"]) > 0
+    radius = np.hypot(*hole.mesh.points[hole.faces["bottom_free"]].reshape(-1, 3)[:, [0, 1]].T)
+    np.testing.assert_allclose(radius, R_IN, atol=0.01)  # on the canal wall
+    st = hole.at_station(1)
+    cone = st.faces["hole_bottom"]
+    r = np.hypot(local[cone, 0], local[cone, 1])
+    np.testing.assert_allclose(local[cone, 2], 5.0 - CONE + (RADIUS - r) * CONE / RADIUS, atol=1e-9)
+    assert len(hole.at_station(2).faces["hole_bottom"]) == 0  # 9.5 mm tip: through the 7.5 mm wall
+
+
+def test_columns_off_the_bone_are_user_errors():
+    mesh, outer = tube()
+    columns = femur_columns(mesh, outer, frame(), depth_cap_mm=20.0)
+    with pytest.raises(UserError, match="miss the bone"):
+        columns.top(np.array([[0.0, 0.0], [0.0, 20.0]]))
+    with pytest.raises(UserError, match="depth cap"):
+        femur_columns(mesh, outer, frame(), depth_cap_mm=0.0)

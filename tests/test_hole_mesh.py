@@ -1,0 +1,191 @@
+"""The column mesher: conformity, orientation, quality, station labels and removed volumes."""
+
+import numpy as np
+import pytest
+
+from hole_cases import CONE, DIAMETER, POINT_ANGLE, RADIUS, plate
+from femstudy.errors import UserError
+from femstudy.hole import HoleFrame, Resolution, hole_mesh
+from femstudy.hole.prisms import split_prisms
+from femstudy.hole.rings import disk, graded_points
+from femstudy.meshing.tetra import signed_volumes
+
+THICKNESS = 5.0
+TIPS = (0.8, 2.0, 3.5, 5.0, 5.9, 9.0)  # entering, two full, breaking through (tip below 5 mm), through
+N_WALL = 24
+
+
+def polygon_area(n: int, radius: float) -> float:
+    return 0.5 * n * radius ** 2 * np.sin(2 * np.pi / n)
+
+
+def faces_of(tets):
+    return np.sort(np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]]),
+                   axis=1)
+
+
+def hole_volume(tip: float, thickness: float, n: int = 4000) -> float:
+    """Exact volume of the bone drilled away: ∫₀^R 2πr clip(s + (R − r) cot(β/2), 0, H) dr."""
+    r = np.linspace(0, RADIUS, n + 1)
+    depth = np.clip(tip - CONE + (RADIUS - r) * CONE / RADIUS, 0, thickness)
+    f = 2 * np.pi * r * depth
+    return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(r)))
+
+
+@pytest.fixture(scope="module")
+def hole():
+    return plate(THICKNESS, TIPS)
+
+
+def test_graded_points_hit_the_fixed_points_and_follow_the_size():
+    s = graded_points(np.array([0.0, 1.0, 4.0]), lambda x: 0.1 + 0.2 * x)
+    assert {0.0, 1.0, 4.0} <= set(np.round(s, 12))
+    steps = np.diff(s)
+    mid = 0.5 * (s[1:] + s[:-1])
+    np.testing.assert_allclose(steps, 0.1 + 0.2 * mid, rtol=0.25)  # n rounds ∫ds/h to an integer
+
+
+def test_disk_conforms_to_the_hole_circle():
+    d = disk(RADIUS, 8.0, 32, 0.2, 1.25)
+    corner = d.xy[d.triangles]
+    u, v = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]
+    area = 0.5 * (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    assert area.min() > 0
+    assert area.sum() == pytest.approx(polygon_area(32, 8.0), rel=1e-12)  # no gap, no overlap
+    assert area[d.in_hole].sum() == pytest.approx(polygon_area(32, RADIUS), rel=1e-12)
+    on_circle = d.ring == d.hole_ring
+    np.testing.assert_allclose(np.hypot(*d.xy[on_circle].T), RADIUS, rtol=1e-14)
+    assert on_circle.sum() == 32
+
+
+def test_minimum_index_split_conforms_on_shared_faces():
+    # two prisms sharing the quad (1, 2 | 4, 5)... numbered so the diagonal choice matters
+    prisms = np.array([[0, 7, 2, 3, 9, 5], [7, 2, 10, 9, 5, 11]])
+    tets, owner = split_prisms(prisms)
+    assert len(tets) == 6 and np.bincount(owner).tolist() == [3, 3]
+    shared = [set(map(tuple, faces_of(tets[owner == k]))) for k in (0, 1)]
+    quad = {7, 2, 9, 5}
+    halves = [{f for f in s if set(f) <= quad} for s in shared]
+    assert halves[0] == halves[1] and len(halves[0]) == 2  # both cut the quad along one diagonal
+    assert split_prisms(np.array([[0, 1, 2, 0, 4, 5]]))[0].shape == (2, 4)  # a collapsed edge: a pyramid
+
+
+def test_mesh_is_conforming_positive_and_closed(hole):
+    tets = hole.mesh.tets
+    assert signed_volumes(hole.mesh.points, tets).min() > 0
+    _, counts = np.unique(faces_of(tets), axis=0, return_counts=True)
+    assert counts.max() == 2  # every face is shared by at most two tetrahedra
+    boundary = np.concatenate(list(hole.faces.values()))
+    assert len(boundary) == np.sum(counts == 1)  # and every boundary face has a label
+    edges = np.sort(np.concatenate([boundary[:, [0, 1]], boundary[:, [1, 2]], boundary[:, [0, 2]]]), axis=1)
+    assert set(np.unique(edges, axis=0, return_counts=True)[1]) == {2}  # a closed surface
+    volume = signed_volumes(hole.mesh.points, tets).sum()
+    assert volume == pytest.approx(polygon_area(N_WALL, 8.0) * THICKNESS, rel=1e-12)
+
+
+def test_quality_is_reported_and_reasonable(hole):
+    # flat cells far from the hole (thin layers under wide outer rings) set the minimum
+    assert 5.0 < hole.quality["min_dihedral_deg"] and hole.quality["max_dihedral_deg"] < 150.0
+    assert hole.summary()["min_dihedral_deg"] == hole.quality["min_dihedral_deg"]
+
+
+def test_labels_lie_on_their_surfaces(hole):
+    local = hole.frame.to_local(hole.mesh.points)
+    r, zeta = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
+    f = hole.faces
+    np.testing.assert_allclose(zeta[f["top"]], 0.0, atol=1e-12)
+    np.testing.assert_allclose(zeta[f["bottom_free"]], THICKNESS, atol=1e-12)
+    np.testing.assert_allclose(r[f["cut_lateral"]], 8.0, rtol=1e-12)
+    assert len(f["cut_bottom"]) == len(f["void"]) == 0
+    for k, tip in enumerate(TIPS):
+        st = hole.at_station(k)
+        s = tip - CONE
+        wall, cone = st.faces["hole_wall"], st.faces["hole_bottom"]
+        if len(wall):
+            np.testing.assert_allclose(r[wall], RADIUS, rtol=1e-12)
+            assert zeta[wall].max() == pytest.approx(min(s, THICKNESS), abs=1e-9)
+        np.testing.assert_allclose(zeta[cone], np.minimum(s + (RADIUS - r[cone]) * CONE / RADIUS, THICKNESS),
+                                   atol=1e-9)
+        assert np.all(r[cone] <= RADIUS * (1 + 1e-12))
+
+
+def test_wall_area_and_exposed_cone(hole):
+    side = 2 * RADIUS * np.sin(np.pi / N_WALL)
+    for k, tip in enumerate(TIPS):
+        st = hole.at_station(k)
+        p = hole.mesh.points
+        area = lambda faces: 0.5 * np.linalg.norm(np.cross(p[faces[:, 1]] - p[faces[:, 0]],  # noqa: E731
+                                                           p[faces[:, 2]] - p[faces[:, 0]]), axis=1).sum()
+        engaged = np.clip(tip - CONE, 0, THICKNESS)
+        assert area(st.faces["hole_wall"]) == pytest.approx(N_WALL * side * engaged, rel=1e-12, abs=1e-12)
+        if tip < THICKNESS:  # a whole cone, or the part below the entry: faceted within 3 %
+            slant = min(tip, CONE) / np.cos(np.radians(POINT_ANGLE) / 2)
+            exact = np.pi * min(tip, CONE) * np.tan(np.radians(POINT_ANGLE) / 2) * slant
+            assert area(st.faces["hole_bottom"]) == pytest.approx(exact, rel=0.03)
+    assert len(hole.at_station(len(TIPS) - 1).faces["hole_bottom"]) == 0  # through
+    assert len(hole.at_station(-1).faces["hole_wall"]) == 0
+
+
+def test_removed_volume_is_the_drilled_hole(hole):
+    """Station k removes the cylinder + cone down to its tip: exactly the polygon area per mm
+    of advance at full engagement, exactly the disk's piecewise-linear cone (an independent sum
+    over the 2-D triangles), and the analytic volume within the faceting error: the hole
+    circle is a 24-gon, 1.1 % short in area, and the rings inside it have fewer vertices
+    (12 at the entering cone's rim, 4.5 % short), so 5 %."""
+    volumes = [hole.removed_volume_mm3(k) for k in range(len(TIPS))]
+    assert np.all(np.diff(volumes) > 0)
+    a = polygon_area(N_WALL, RADIUS)
+    assert volumes[2] - volumes[1] == pytest.approx(a * (TIPS[2] - TIPS[1]), rel=1e-12)
+    assert volumes[-1] == pytest.approx(a * THICKNESS, rel=1e-12)
+    d = hole.disk
+    tri = d.triangles[d.in_hole]
+    corner = d.xy[tri]
+    u, v = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]
+    area = 0.5 * np.abs(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0])
+    for k, tip in enumerate(TIPS):
+        depth = np.clip(tip - CONE + (RADIUS - d.radius) * CONE / RADIUS, 0, THICKNESS)
+        assert volumes[k] == pytest.approx(np.sum(area * depth[tri].mean(axis=1)), rel=1e-12), k
+        assert volumes[k] == pytest.approx(hole_volume(tip, THICKNESS), rel=0.05), k
+    drilled = hole.station >= 0
+    assert np.all(hole.in_hole[drilled])
+
+
+def test_refinement_scales_every_size():
+    coarse, fine = Resolution().scaled, Resolution(refinement=1.5).scaled
+    assert fine["n_wall"] == 36 and coarse["n_wall"] == 24
+    assert fine["wall_mm"] == pytest.approx(coarse["wall_mm"] / 1.5)
+    assert np.log(fine["growth"]) == pytest.approx(np.log(coarse["growth"]) / 1.5)
+    n = [plate(1.0, (4.0,), refinement=f).mesh.n_points for f in (1.0, 1.5)]
+    assert 2.5 < n[1] / n[0] < 4.5  # ≈ 1.5³ for a three-dimensional refinement
+
+
+def test_tilted_top_keeps_the_hole_exact():
+    """A top surface tilted by 20° across the drill axis: the wall and cone stay exact, the
+    top is followed, the mesh is still conforming."""
+    slope = np.tan(np.radians(20))
+    hole = hole_mesh(HoleFrame.along([0, 0, 0], [0, 0, 1]), DIAMETER, POINT_ANGLE, 6.0, [3.0, 4.5],
+                     top=lambda xy: slope * xy[:, 0], bottom=lambda xy: (6.0 + slope * xy[:, 0], np.ones(len(xy), bool)))
+    local = hole.frame.to_local(hole.mesh.points)
+    r, zeta = np.hypot(local[:, 0], local[:, 1]), local[:, 2]
+    np.testing.assert_allclose(zeta[hole.faces["top"]], slope * local[hole.faces["top"], 0], atol=1e-9)
+    assert signed_volumes(hole.mesh.points, hole.mesh.tets).min() > 0
+    st = hole.at_station(1)
+    cone = st.faces["hole_bottom"]
+    np.testing.assert_allclose(zeta[cone], 4.5 - CONE + (RADIUS - r[cone]) * CONE / RADIUS, atol=1e-9)
+    np.testing.assert_allclose(r[st.faces["hole_wall"]], RADIUS, rtol=1e-12)
+    _, counts = np.unique(faces_of(st.mesh.tets), axis=0, return_counts=True)
+    assert counts.max() == 2
+
+
+def test_bad_inputs_are_user_errors():
+    frame = HoleFrame.along([0, 0, 0], [0, 0, 1])
+    flat = lambda xy: np.zeros(len(xy))  # noqa: E731
+    deep = lambda xy: (np.full(len(xy), 3.0), np.ones(len(xy), bool))  # noqa: E731
+    with pytest.raises(UserError, match="increasing"):
+        hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [2.0, 1.0], flat, deep)
+    with pytest.raises(UserError, match="submodel radius"):
+        hole_mesh(frame, DIAMETER, POINT_ANGLE, 1.0, [2.0], flat, deep)
+    with pytest.raises(UserError, match="no bone"):
+        hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [2.0], flat, lambda xy: (np.zeros(len(xy)), np.ones(len(xy), bool)))
+    with pytest.raises(UserError, match="station 7"):
+        plate(THICKNESS, TIPS).at_station(7)
