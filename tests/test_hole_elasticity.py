@@ -108,16 +108,16 @@ def check(rows, wall_tolerance, tolerances):
 @pytest.mark.slow
 def test_kirsch_hole_in_a_plate_converges():
     """σ∞ = 1 MPa along x: σθθ = 3σ∞ at 90°, −σ∞ at 0° on the wall. Tolerances (units of σ∞) at
-    the finest level (refinement 2.25, 52 vertices on the hole circle, 73k DOFs): 0.015 on the
-    wall; 0.05, 0.025 and 0.015 at 0.5, 1 and 2 mm (the largest error of any component at any
+    the finest level (refinement 2.25, 56 vertices on the hole circle, 68k DOFs): 0.015 on the
+    wall; 0.05, 0.035 and 0.02 at 0.5, 1 and 2 mm (the largest error of any component at any
     sample point: the element stresses are evaluated anywhere in the element, corners included);
     and every error at the finest level under 0.6 of the coarsest's."""
-    check(report("Kirsch", kirsch), 0.015, (0.05, 0.025, 0.015))
+    check(report("Kirsch", kirsch), 0.015, (0.05, 0.035, 0.02))
 
 
 @pytest.mark.slow
 def test_lame_cylinder_under_internal_pressure_converges():
     """p = 1 MPa on the wall of a thick cylinder 1.35 ≤ r ≤ 8 mm: σ_rr = −p and σθθ = 1.06 p at
-    the wall. Tolerances (units of p) at the finest level: 0.01 on the wall; 0.02, 0.01 and
-    0.005 at 0.5, 1 and 2 mm; and every error at the finest level under 0.6 of the coarsest's."""
-    check(report("Lamé", lame_case), 0.01, (0.02, 0.01, 0.005))
+    the wall. Tolerances (units of p) at the finest level: 0.01 on the wall; 0.02, 0.015 and
+    0.008 at 0.5, 1 and 2 mm; and every error at the finest level under 0.6 of the coarsest's."""
+    check(report("Lamé", lame_case), 0.01, (0.02, 0.015, 0.008))
