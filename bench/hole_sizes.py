@@ -5,7 +5,8 @@ drill axis at refinements 1, 1.5 and 2.25 with stations every ``--step`` mm of t
 until the cone's corner reaches the case's hole depth, and print per level: the mesh time, points,
 tetrahedra, minimum dihedral angle, and the P2 DOFs of every station (3 × (vertices + edges)
 of its tetrahedra). With ``--solve``, also assemble and factorise one station per level with
-the cut boundary prescribed (wall time and the factor's method); one heavy job at a time.
+the cut boundary prescribed (wall times, the factor's method and, for PARDISO, its planned
+memory); one heavy job at a time. Times are wall-clock on a shared machine: expect noise.
 
     FEMSTUDY_CACHE=... PYTHONPATH=. python bench/hole_sizes.py cases/middiaphysis.toml [--solve]
 """
@@ -74,7 +75,9 @@ def main() -> None:
             dofs = node_dofs(cut).ravel()
             solve_prescribed(system, dofs, np.zeros(len(dofs)), np.zeros(system.n_dofs))
             factor = [v for k, v in system.cache.items() if k[1] == "K-factor"][0]
-            print(f"  deepest station: {system.n_dofs:,} DOFs, assembly {assembled:.1f} s, {factor.describe()}")
+            planned = getattr(factor, "planned_bytes", None)
+            memory = f", factor {planned / 2**30:.2f} GiB planned" if planned else ""
+            print(f"  deepest station: {system.n_dofs:,} DOFs, assembly {assembled:.1f} s, {factor.describe()}{memory}")
 
 
 if __name__ == "__main__":

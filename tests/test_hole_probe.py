@@ -6,7 +6,7 @@ import pytest
 
 from hole_cases import CONE, RADIUS, station_system
 from femstudy.fe.materials import isotropic_stiffness
-from femstudy.hole import offset_samples, probe
+from femstudy.hole import offset_samples, point_probe
 
 THICKNESS = 4.0
 TIPS = (2.5, 6.0)
@@ -36,7 +36,7 @@ def test_p2_probe_reproduces_a_quadratic_field(p2):
     station, system = p2
     u_nodes, _ = quadratic_field(system.nodes)
     points = points_in_cells(system, 200, 1)
-    result = probe(system, points)
+    result = point_probe(system, points)
     assert result.inside.all()
     u, strain = quadratic_field(points)
     np.testing.assert_allclose(result.displacement(u_nodes.ravel()), u, atol=1e-12)
@@ -48,7 +48,7 @@ def test_p1_probe_and_several_load_cases():
     station, system = station_system(THICKNESS, TIPS, 0, 1)
     linear = np.column_stack([system.nodes @ [1e-3, 0, 0], system.nodes @ [0, 2e-3, 1e-3], np.zeros(len(system.nodes))])
     points = points_in_cells(system, 50, 2)
-    result = probe(system, points)
+    result = point_probe(system, points)
     two = np.column_stack([linear.ravel(), 2 * linear.ravel()])
     s = result.stress(two)
     assert s.shape == (50, 2, 6)
@@ -63,7 +63,7 @@ def test_points_outside_are_reported_not_zero(p2):
                        [0.0, 0.0, -1.0],  # above the top
                        [3.0, 0.0, 1.0],  # in bone
                        [0.0, 20.0, 1.0]])  # beyond the submodel
-    result = probe(system, points)
+    result = point_probe(system, points)
     assert result.outside.tolist() == [0, 1, 3]
     s = result.stress(np.ones(system.n_dofs))
     assert np.isnan(s[[0, 1, 3]]).all() and np.isfinite(s[2]).all()
@@ -72,7 +72,7 @@ def test_points_outside_are_reported_not_zero(p2):
 def test_boundary_vertices_are_found(p2):
     station, system = p2
     wall = np.unique(station.faces["hole_wall"])
-    assert probe(system, station.mesh.points[wall]).inside.all()
+    assert point_probe(system, station.mesh.points[wall]).inside.all()
 
 
 def distance_to_hole(points, corner, tip):
@@ -105,7 +105,7 @@ def test_offset_samples_are_at_the_distance(p2, delta):
     ring = wall[np.isclose(wall[:, 2], wall[0, 2])]
     theta = np.sort(np.arctan2(ring[:, 1], ring[:, 0]))
     assert (RADIUS + delta) * np.diff(theta).max() <= samples.spacing_mm * (1 + 1e-9)
-    inside = probe(system, samples.points).inside
+    inside = point_probe(system, samples.points).inside
     assert inside.mean() > (0.5 if delta == 5.0 else 0.9)  # some fall below the 4 mm plate
 
 

@@ -25,6 +25,9 @@ log = logging.getLogger(__name__)
 
 #: Barycentric tolerance for accepting a point in its closest cell.
 BOUNDARY_TOLERANCE = 1e-9
+#: Points this far outside (in barycentric coordinates) the cell VTK gives are outside the
+#: mesh: a point inside lies in its closest cell, on a shared face at worst.
+RETRY_WINDOW = 1e-3
 #: Voigt rows [xx, yy, zz, yz, xz, xy]: for each row, the (gradient, component) pairs it sums.
 _VOIGT = [((0, 0),), ((1, 1),), ((2, 2),), ((2, 1), (1, 2)), ((2, 0), (0, 2)), ((1, 0), (0, 1))]
 
@@ -81,8 +84,9 @@ def _reference_coordinates(system, element: np.ndarray, points: np.ndarray):
 
 def _locate(system, points: np.ndarray):
     """Containing element (−1 if none) and reference coordinates of every point. VTK's locator
-    answers first; a point it places outside its cell by more than the tolerance (it happens
-    on shared faces) is tried in the 64 elements with the nearest centroids."""
+    answers first (containing cell, else closest cell); a point it places just outside its
+    cell (between the tolerance and :data:`RETRY_WINDOW`: it happens on shared faces) is tried
+    in the 64 elements with the nearest centroids."""
     import pyvista as pv
     from scipy.spatial import cKDTree
 
@@ -91,7 +95,7 @@ def _locate(system, points: np.ndarray):
     element = np.asarray(grid.find_containing_cell(points), dtype=np.int64)
     element[element < 0] = np.asarray(grid.find_closest_cell(points[element < 0]), dtype=np.int64)
     xi, invJ, worst = _reference_coordinates(system, element, points)
-    retry = np.flatnonzero(worst < -BOUNDARY_TOLERANCE)
+    retry = np.flatnonzero((worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW))
     if len(retry):
         k = min(64, mesh.nelements)
         _, near = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T).query(points[retry], k)
@@ -104,7 +108,7 @@ def _locate(system, points: np.ndarray):
     return element, xi, invJ
 
 
-def probe(system, points: np.ndarray) -> PointProbe:
+def point_probe(system, points: np.ndarray) -> PointProbe:
     """Locate ``points`` in the system's mesh and build the point operators.
 
     Parameters
@@ -118,7 +122,7 @@ def probe(system, points: np.ndarray) -> PointProbe:
 
     Example
     -------
-    >>> p = probe(system, np.array([[1.0, 2.0, 0.5]]))  # doctest: +SKIP
+    >>> p = point_probe(system, np.array([[1.0, 2.0, 0.5]]))  # doctest: +SKIP
     >>> p.stress(u)[0]  # σxx, σyy, σzz, σyz, σxz, σxy [MPa]  # doctest: +SKIP
     """
     points = np.atleast_2d(np.asarray(points, float))

@@ -14,7 +14,7 @@ The curve is sampled every ``spacing_mm`` of arc length and swept about the axis
 ⌈2π r / spacing⌉ (at least 8) points per circle of radius r (one on the axis). The default
 spacing, 0.05 mm + δ/20 (0.075 mm at δ = 0.5 mm, 0.3 mm at δ = 5 mm), resolves the stress
 field, whose length scales there are δ and the drill radius. Points outside the bone (above
-the top, below the bottom, beyond R_sub) are not in the mesh; :func:`femstudy.hole.probe.probe`
+the top, below the bottom, beyond R_sub) are not in the mesh; :func:`femstudy.hole.probe.point_probe`
 reports them. Units: mm.
 """
 
@@ -70,7 +70,7 @@ def offset_samples(station, distance_mm: float, spacing_mm: float | None = None)
     Example
     -------
     >>> samples = offset_samples(hole.at_station(2), 1.0)  # doctest: +SKIP
-    >>> stress = probe(system, samples.points).stress(u)  # doctest: +SKIP
+    >>> stress = point_probe(system, samples.points).stress(u)  # doctest: +SKIP
     """
     require(station.index >= 0, "offset samples need a drilled station (index ≥ 0)")
     require(distance_mm > 0, f"the distance from the hole must be positive, got {distance_mm} mm")
