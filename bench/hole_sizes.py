@@ -36,30 +36,44 @@ def p2_dofs(tets: np.ndarray) -> int:
     return 3 * (len(np.unique(tets)) + len(np.unique(edges, axis=0)))
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_femur_arguments(parser: argparse.ArgumentParser) -> None:
+    """The case and the local model's placement, shared with bench/hole_convergence.py."""
     parser.add_argument("case")
     parser.add_argument("--submodel-radius", type=float, default=8.0, help="R_sub [mm]")
     parser.add_argument("--depth-cap", type=float, default=12.0, help="deepest column below its top [mm]")
     parser.add_argument("--step", type=float, default=1.0, help="station spacing in tip depth [mm]")
     parser.add_argument("--levels", type=float, nargs="+", default=[1.0, 1.5, 2.25])
-    parser.add_argument("--solve", action="store_true", help="assemble and factorise the deepest station per level")
-    args = parser.parse_args()
 
+
+def femur_hole(args):
+    """(case, a function refinement → HoleMesh, station tip depths) for the case's femur."""
     case = load_case(args.case)
     model = build_femur_model(case)
-    site = model.site
-    frame = HoleFrame.along(site.entry_point, site.direction)
+    frame = HoleFrame.along(model.site.entry_point, model.site.direction)
     columns = femur_columns(model.mesh, outer_faces(model.mesh, model.frame), frame, args.depth_cap)
     diameter, angle = case.drill.diameter_mm, case.drill.point_angle_deg
     cone = diameter / 2 / np.tan(np.radians(angle) / 2)
     tips = np.arange(args.step, case.drilling.depth_mm + cone + 1e-9, args.step)
-    print(f"{case.name}: cortex {site.cortical_thickness_mm:.2f} mm along the drill, R_sub {args.submodel_radius} mm, "
-          f"depth cap {args.depth_cap} mm, {len(tips)} stations (tips {tips[0]:g}..{tips[-1]:g} mm)")
+
+    def build(level: float):
+        return hole_mesh(frame, diameter, angle, args.submodel_radius, tips, columns.top, columns.bottom,
+                         columns.region, Resolution(refinement=level))
+
+    print(f"{case.name}: cortex {model.site.cortical_thickness_mm:.2f} mm along the drill, R_sub "
+          f"{args.submodel_radius} mm, depth cap {args.depth_cap} mm, {len(tips)} stations (tips {tips[0]:g}.."
+          f"{tips[-1]:g} mm)")
+    return case, build, tips
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_femur_arguments(parser)
+    parser.add_argument("--solve", action="store_true", help="assemble and factorise the deepest station per level")
+    args = parser.parse_args()
+    case, build, tips = femur_hole(args)
     for level in args.levels:
         start = time.perf_counter()
-        hole = hole_mesh(frame, diameter, angle, args.submodel_radius, tips, columns.top, columns.bottom,
-                         columns.region, Resolution(refinement=level))
+        hole = build(level)
         seconds = time.perf_counter() - start
         dofs = [p2_dofs(hole.at_station(k).mesh.tets) for k in range(hole.n_stations)]
         s = hole.summary()
