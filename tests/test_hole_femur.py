@@ -12,6 +12,7 @@ from femstudy.fe.geometry import tube_mesh
 from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL, TetMesh
 from femstudy.hole import HoleFrame, hole_mesh
 from femstudy.hole.femur import femur_columns
+from femstudy.meshing.landmarks import boundary_faces
 from femstudy.meshing.tetra import signed_volumes
 
 R_OUT, R_IN, N_AROUND = 14.0, 6.5, 96
@@ -25,10 +26,7 @@ def tube():
     centroid = mesh.points[mesh.tets].mean(axis=1)
     region = np.where(centroid[:, 2] > 30.0, CORTICAL, CANCELLOUS_DISTAL).astype(np.int8)  # two regions
     mesh = TetMesh(mesh.points, mesh.tets, region)
-    faces = np.concatenate([mesh.tets[:, [1, 2, 3]], mesh.tets[:, [0, 3, 2]], mesh.tets[:, [0, 1, 3]],
-                            mesh.tets[:, [0, 2, 1]]])
-    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-    boundary = faces[counts[inverse.ravel()] == 1]
+    boundary = boundary_faces(mesh)
     outer = boundary[np.hypot(*mesh.points[boundary].mean(axis=1)[:, :2].T) > (R_OUT + R_IN) / 2]
     return mesh, outer
 

@@ -20,15 +20,10 @@ import numpy as np
 from femstudy.errors import UserError, require
 from femstudy.femur_model import TetMesh
 from femstudy.hole.frame import HoleFrame
+from femstudy.meshing.landmarks import boundary_faces
 
 #: Rays per batch in the ray casts (bounds the (rays × triangles) temporaries).
 RAY_BATCH = 64
-
-
-def _boundary_faces(tets: np.ndarray) -> np.ndarray:
-    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
-    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-    return faces[counts[inverse.ravel()] == 1]
 
 
 def _crossings(origins: np.ndarray, direction: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -131,5 +126,5 @@ def femur_columns(mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, dept
     require(depth_cap_mm > 0, f"the depth cap must be positive, got {depth_cap_mm} mm")
     outer_faces = np.asarray(outer_faces, dtype=np.int64).reshape(-1, 3)
     require(len(outer_faces) > 0, "the outer surface has no triangles")
-    return FemurColumns(mesh, frame, outer_faces, _boundary_faces(np.asarray(mesh.tets)), float(depth_cap_mm),
+    return FemurColumns(mesh, frame, outer_faces, boundary_faces(mesh), float(depth_cap_mm),
                         float(region_tolerance_mm))
