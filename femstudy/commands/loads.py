@@ -41,16 +41,17 @@ def run(args: argparse.Namespace) -> int:
     drill = Drill(diameter_mm=args.diameter_mm, point_angle_deg=args.point_angle)
     if args.wall_mm is not None:
         drill = drill.with_(wall_mm=args.wall_mm)
-    bone = load_bone_set(args.bone)
+    bone = load_bone_set(args.bone, args.settings.bones_dir)
     for name, value in (("u1_MPa", args.u1_mpa), ("u2_MPa", args.u2_mpa)):
         if value is not None:
             bone = replace(bone, **{name: value})
     cond = DrillingConditions(args.feed, args.rpm, args.cortex_mm, bone, drill)
     if not bone.in_calibrated_range(args.feed, args.rpm):
-        from femstudy.console import Console
+        import logging
 
-        Console.warn(f"f = {args.feed:g} mm/s, N = {args.rpm:g} rpm lies outside the conditions "
-                     f"bone set '{bone.name}' was calibrated on; its power law is extrapolated")
+        logging.getLogger("femstudy").warning(f"f = {args.feed:g} mm/s, N = {args.rpm:g} rpm lies outside the "
+                                              f"conditions bone set '{bone.name}' was calibrated on; its power law "
+                                              "is extrapolated")
     print(report.summary_text(cond, MODELS))
     histories = [evaluate(m, cond, time_grid(cond, args.dt)) for m in MODELS]
     if args.csv:

@@ -89,17 +89,15 @@ def effects_from_args(args) -> "Effects":
 
 
 def run(args: argparse.Namespace) -> int:
-    from femstudy.console import Console
     from femstudy.recordings import synthesize, write_recording
 
-    console = Console(args.quiet)
     if args.dataset:
         from femstudy.recordings.dataset import write_dataset
 
         require(args.replicates >= 1, f"--replicates must be at least 1, got {args.replicates}")
         summary = write_dataset(args.dataset, bone=args.bone, replicates=args.replicates,
                                 outliers=args.outliers, seed=args.seed, sample_rate_hz=args.rate_hz,
-                                torque_unit=args.torque_unit, progress=console.progress)
+                                torque_unit=args.torque_unit)
         print(summary)
         return 0
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,8 @@ from femstudy.recordings.reader import Recording, write_recording
 from femstudy.recordings.synthetic import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, synthesize
 
 #: Table 4-1 calibration conditions and Table 5-3 validation conditions, (f [mm/s], N [rpm]).
+log = logging.getLogger(__name__)
+
 CALIBRATION_CONDITIONS = ((1.0, 1000.0), (1.5, 1100.0), (1.5, 1250.0), (1.75, 1500.0), (2.0, 1500.0))
 VALIDATION_CONDITIONS = ((1.75, 1250.0), (2.0, 1000.0))
 #: (model, μ_f factor, μ_w factor, reason) of the planted outlier runs, used in turn. Each is
@@ -110,14 +113,32 @@ TRUTH_COLUMNS = ["file", "role", "feed_mm_s", "spindle_rpm", "replicate", "condi
                  "outlier", "outlier_reason"]
 
 
-def write_dataset(folder, bone: str = "bovine", replicates: int = 10, outliers: int = 3, seed: int = 0,
-                  sample_rate_hz: float = 1000.0, torque_unit: str = "Nmm", progress=None) -> str:
-    """Write the data set (atomically, as a whole folder) and return a summary to print.
+def write_dataset(folder, bone: str | BoneSet = "bovine", replicates: int = 10, outliers: int = 3, seed: int = 0,
+                  sample_rate_hz: float = 1000.0, torque_unit: str = "Nmm") -> str:
+    """Write a synthetic calibration data set (atomically, as a whole folder); return a summary.
 
-    Layout: ``calibration/*.csv``, ``validation/*.csv``, ``truth.csv`` (per-run ground truth)
-    and ``generating_bone_set.toml`` (the power law the runs were drawn around).
+    Parameters
+    ----------
+    folder : path-like
+        Written as ``calibration/*.csv``, ``validation/*.csv``, ``truth.csv`` (per-run ground
+        truth) and ``generating_bone_set.toml`` (the power law the runs were drawn around).
+    bone : str or BoneSet
+        The bone set the runs' friction is drawn around.
+    replicates, outliers, seed : int
+        Runs per condition, planted outlier runs, random seed.
+    sample_rate_hz : float
+    torque_unit : {"Nmm", "Nm"}
+
+    Returns
+    -------
+    str
+        What was written and how to calibrate on it.
+
+    Examples
+    --------
+    >>> print(write_dataset("demo", replicates=4))   # doctest: +SKIP
     """
-    bone_set = load_bone_set(bone)
+    bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
     runs = dataset_recordings(bone_set, replicates=replicates, outliers=outliers, seed=seed,
                               sample_rate_hz=sample_rate_hz)
     truth = io.StringIO()
@@ -129,8 +150,7 @@ def write_dataset(folder, bone: str = "bovine", replicates: int = 10, outliers: 
             m = rec.metadata
             writer.writerow([relative] + [m[c] if not isinstance(m[c], float) else f"{m[c]:.6g}"
                                           for c in TRUTH_COLUMNS[1:]])
-            if progress and (k + 1) % 10 == 0:
-                progress(f"synthesised {k + 1}/{len(runs)} runs")
+            log.info("synthesised %d/%d runs", k + 1, len(runs), extra={"progress": ("runs", k + 1, len(runs))})
         atomic.write_text(tmp / "truth.csv", truth.getvalue())
         atomic.write_text(tmp / "generating_bone_set.toml", bone_set.to_toml())
     n_val = sum(r[0].startswith("validation") for r in runs)

@@ -26,11 +26,14 @@ nominal one.
 from __future__ import annotations
 
 import itertools
-import tomllib
 from pathlib import Path
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from femstudy.casefile import Case, with_overrides
 from femstudy.errors import UserError, require
+from femstudy.schema import parse_toml
 from femstudy.sweep.execute import Point
 
 
@@ -51,31 +54,37 @@ def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list
     return points
 
 
+class SweepFile(BaseModel):
+    """A parameter-sweep file: the case it sweeps, its name, a full-factorial ``[grid]`` and/or
+    explicit ``[[point]]`` tables of dotted case keys."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    case: str
+    name: str | None = None
+    grid: dict[str, Annotated[list, Field(min_length=1)]] = {}
+    point: list[Annotated[dict, Field(min_length=1)]] = []
+
+    @model_validator(mode="after")
+    def _some_points(self):
+        if not self.grid and not self.point:
+            raise ValueError("give a [grid] or at least one [[point]]")
+        return self
+
+
 def read_parameter_sweep(path: Path) -> tuple[str, Path, list[Point]]:
-    """(name, case file, points) of a parameter-sweep TOML file."""
+    """(name, case file, points) of a parameter-sweep TOML file (:class:`SweepFile`)."""
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"cannot read sweep file {path}: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: TOML syntax error: {exc}") from None
-    unknown = set(doc) - {"case", "name", "grid", "point"}
-    require(not unknown, f"{path}: unknown key(s) {', '.join(sorted(unknown))}; a sweep file has case, name, "
-                         f"[grid] and [[point]]")
-    require(isinstance(doc.get("case"), str), f"{path}: 'case' must name the case file to sweep")
-    case_path = (path.parent / doc["case"]).resolve()
-    grid = doc.get("grid", {})
-    listed = doc.get("point", [])
-    require(isinstance(grid, dict) and isinstance(listed, list), f"{path}: [grid] is a table, [[point]] a list")
-    require(grid or listed, f"{path}: give a [grid] or at least one [[point]]")
-    for key, values in grid.items():
-        require(isinstance(values, list) and values, f"{path}: grid key '{key}' needs a non-empty list of values")
+    doc = parse_toml(text, SweepFile, str(path))
+    case_path = (path.parent / doc.case).resolve()
     points = []
-    keys = list(grid)
-    for combo in itertools.product(*(grid[k] for k in keys)) if keys else []:
+    keys = list(doc.grid)
+    for combo in itertools.product(*(doc.grid[k] for k in keys)) if keys else []:
         overrides = dict(zip(keys, combo))
         points.append(Point("study", overrides, label=", ".join(f"{k}={v}" for k, v in overrides.items())))
-    for overrides in listed:
-        require(isinstance(overrides, dict) and overrides, f"{path}: every [[point]] needs at least one key")
+    for overrides in doc.point:
         points.append(Point("study", overrides, label=", ".join(f"{k}={v}" for k, v in overrides.items())))
-    return str(doc.get("name", path.stem)), case_path, points
+    return doc.name or path.stem, case_path, points
