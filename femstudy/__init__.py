@@ -28,7 +28,7 @@ _API = {
     "run_cases": "femstudy.study.study",
     "mesh_case": "femstudy.study.femur", "femur_model": "femstudy.study.femur",
     "write_femur": "femstudy.meshing.builtin_femur", "FemurParameters": "femstudy.meshing.builtin_femur",
-    "sweep": "femstudy.sweep.run", "SweepResult": "femstudy.sweep.run",
+    "sweep": "femstudy.sweeps.run", "SweepResult": "femstudy.sweeps.run",
     "calibrate": "femstudy.recordings.workflow", "CalibrationResult": "femstudy.recordings.pipeline",
     "read_recording": "femstudy.recordings.reader", "Recording": "femstudy.recordings.reader",
     "write_recording": "femstudy.recordings.reader", "synthesize": "femstudy.recordings.synthetic",

@@ -163,7 +163,9 @@ class DrillSpec(_Section):
 
 class DrillingSpec(_Section):
     """Operating point and load models. ``depth_mm = "cortex"`` drills the local cortex.
-    ``mu_f``/``mu_w`` replace the bone set's power law (e.g. to sweep friction);
+    ``bone`` names the friction calibration: "human" (thesis Table 5-11; the default, femurs
+    here being human), "bovine" (Table 5-1), "human-printed" (the thesis's printed Eqs
+    5.8/5.9) or a calibrated set. ``mu_f``/``mu_w`` replace its power law (e.g. to sweep friction);
     ``load_scale`` multiplies the thrust and torque of both loadings (sensitivity studies,
     safety factors; 0 gives the unloaded bone). ``flute_oscillation`` is the relative
     amplitude of the per-flute oscillation and ``breakthrough_release_s`` the time over which
@@ -172,7 +174,7 @@ class DrillingSpec(_Section):
 
     feed_mm_s: float = Field(2.0, gt=0, le=50)
     spindle_rpm: float = Field(1500.0, gt=0, le=100_000)
-    bone: str = "bovine"
+    bone: str = "human"
     mu_f: float | None = Field(None, gt=0, le=5)
     mu_w: float | None = Field(None, gt=0, le=10)
     depth_mm: Union[Literal["cortex"], Annotated[float, Field(gt=0, le=100)]] = 6.0
@@ -194,8 +196,9 @@ class TimeSpec(_Section):
 
 class AnalysisSpec(_Section):
     """``resolved`` adds a transient whose step resolves the lowest mode
-    (``steps_per_period`` steps per period) over the whole history and through breakthrough,
-    with the per-flute oscillation and breakthrough release: the dynamic amplification."""
+    (``steps_per_period`` steps per period), with the per-flute oscillation and breakthrough
+    release, from ``resolved_lead_s`` before breakthrough (started from the quasi-static state
+    there) to 0.1 s past the release: the dynamic amplification near the peak loads."""
 
     transient: bool = True
     rayleigh_alpha_per_s: float = Field(0.0, ge=0)
@@ -204,6 +207,7 @@ class AnalysisSpec(_Section):
     exclusion_radius_mm: PositiveMM = 4.0
     resolved: bool = True
     steps_per_period: int = Field(20, ge=10, le=200)
+    resolved_lead_s: float = Field(0.5, gt=0, le=3600)
 
 
 class OutputSpec(_Section):

@@ -84,7 +84,7 @@ def test_overrides_are_validated_like_the_file():
 
 
 def test_a_bad_sweep_file_is_refused_with_its_key_and_line(tmp_path):
-    from femstudy.sweep.spec import read_parameter_sweep
+    from femstudy.sweeps.spec import read_parameter_sweep
 
     path = tmp_path / "s.toml"
     path.write_text('case = "c.toml"\n\n[grid]\n"drilling.feed_mm_s" = []\n')

@@ -104,3 +104,11 @@ def test_a_bad_bone_set_file_is_refused_with_its_key_and_line(tmp_path):
     path.write_text(good.replace("u1_MPa", "u1_mpa"))
     with pytest.raises(UserError, match="u1_mpa: unknown key; did you mean 'u1_MPa'"):
         friction.read_bone_set_file(path)
+
+
+def test_the_printed_human_equations_are_available_as_a_bone_set():
+    """'human-printed' gives Table 5-12's printed coefficients (Eqs 5.8/5.9)."""
+    printed = friction.builtin_bone_set("human-printed")
+    np.testing.assert_allclose(printed.a, [63.48, -102.7, -9.106, 14.25], rtol=2e-3)
+    np.testing.assert_allclose(printed.b, [193.9, -290.2, -27.20, 40.63], rtol=2e-3)
+    assert friction.builtin_bone_set("human").friction(2.0, 1500) != pytest.approx(printed.friction(2.0, 1500))

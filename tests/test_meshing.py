@@ -195,7 +195,8 @@ def forbid_tetwild(cache_dir, monkeypatch):
 def test_cached_rebuild_skips_tetwild(builtin, forbid_tetwild, cache_dir):
     case, first = builtin
     again = femur_model(case, cache_dir, SIZE_MM)
-    assert again.stats["cache_hit"] and not first.stats["cache_hit"]
+    # ``first`` may itself come from the session cache; TetWild being forbidden is the check
+    assert again.stats["cache_hit"]
     assert again.stats["cache_key"] == first.stats["cache_key"]
     assert np.array_equal(again.mesh.tets, first.mesh.tets) and np.array_equal(again.mesh.region, first.mesh.region)
     assert np.array_equal(again.clamps.proximal, first.clamps.proximal)

@@ -183,3 +183,31 @@ def test_picture_without_fields_and_report_lists_what_exists(tmp_path, mesh_cach
     assert (out / "femur.png").is_file() and not (out / "fields").exists()
     text = (out / "report.md").read_text()
     assert "femur.png" in text and "Fields for ParaView" not in text
+
+
+def test_the_reduced_march_gives_the_maxima_of_plain_stepping(tmp_path, mesh_cache):
+    """The default case's loading on a coarse femur: the study's one-factorisation march
+    (Ritz vectors of K_ff) and plain stepping with K-hat factorised (how the transient was
+    computed before) give the same maxima to 1e-6."""
+    from femstudy import fe
+    from femstudy.study.femur import femur_model
+    from femstudy.study.loading import case_loading
+    from femstudy.study.run import study_channels
+
+    case = parse_case((REPO / "cases" / "middiaphysis.toml").read_text()).model_copy()
+    model = femur_model(case, mesh_cache, 16.0)
+    loading = case_loading(case, model.site.cortical_thickness_mm)
+    system = fe.assemble(model.mesh, case.materials.to_fe(), order=2, long_axis=model.frame.up)
+    patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
+    fs = fe.factorize(system, fe.clamp(system, model.clamps))
+    channels = study_channels(system, patch, model, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
+    amplitudes = np.column_stack([loading.dynamic.thrust_N, loading.dynamic.torque_Nmm])
+    peaks = {}
+    for scheme in ("auto", "stepping"):
+        recorder = fe.StepRecorder(channels, len(loading.times_s))
+        march = fe.solve_transient(fs, patch.patterns, amplitudes, loading.times_s, observer=recorder, scheme=scheme)
+        assert march.scheme == {"auto": "reduced", "stepping": "stepping"}[scheme]
+        history = recorder.history()
+        peaks[scheme] = {k: history[k].peak for k in ("deflection", "drill_point", "von_mises", "von_mises/outside")}
+    for name, value in peaks["stepping"].items():
+        assert peaks["auto"][name] == pytest.approx(value, rel=1e-6), name

@@ -32,8 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from femstudy.sweep.report import convergence_markdown
-    from femstudy.sweep.run import sweep
+    from femstudy.sweeps.report import convergence_markdown
+    from femstudy.sweeps.run import sweep
 
     s = args.settings
     result = sweep(args.file, args.sizes, order=args.order, refine=args.refine, target=args.target,
@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     if result.kind == "mesh":
         print(convergence_markdown(result.convergence, args.target))
     else:
-        from femstudy.sweep.report import table_markdown
+        from femstudy.sweeps.report import table_markdown
 
         print(table_markdown(result.rows, result.columns))
     print(f"wrote {result.folder / 'sweep.md'}")

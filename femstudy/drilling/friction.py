@@ -37,6 +37,7 @@ CANCELLOUS_SPECIFIC_ENERGY_MPA = thesis.CANCELLOUS_SPECIFIC_ENERGY_MPA
 BUILTIN_TABLES = {
     "bovine": ("table_5_1_bovine_friction.csv", "thesis Table 5-1, bovine femur"),
     "human": ("table_5_11_human_friction.csv", "thesis Table 5-11, human femur"),
+    "human-printed": ("table_5_12_human_printed.csv", "thesis Table 5-12 / Eqs 5.8-5.9 as printed, human femur"),
 }
 
 

@@ -3,7 +3,8 @@
 Block shift-invert Krylov about σ = 0 with Rayleigh–Ritz: the space spanned by a block X0 of
 k + 2 vectors and K⁻¹M X0, (K⁻¹M)² X0, … (each block one multi-column solve with the study's
 factorisation of K_ff) is projected, and the lowest k Ritz pairs are accepted when every
-residual ‖Kφ − ω²Mφ‖ is below 1e-8 of ‖Kφ‖ (the frequency is then exact to ~1e-16).
+residual ‖Kφ − ω²Mφ‖ is below 1e-6 of ‖Kφ‖ (the frequency, a Rayleigh quotient, is then
+exact to ~1e-12).
 ARPACK's shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) needs the same factorisation
 but one single-vector solve per step, about 30 for 6 modes of the femur; the block method
 needs 3–5 block solves. With K in N/mm and M in tonne, ω² comes out in 1/s².
@@ -36,7 +37,7 @@ class Modes:
         return 1.0 / self.frequency_Hz
 
 
-def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-8, max_blocks: int = 20) -> Modes:
+def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks: int = 20) -> Modes:
     """The lowest natural frequencies [Hz] and mode shapes of the clamped model.
 
     Parameters
@@ -72,7 +73,7 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-8, max_blocks
         if residual.max() <= rtol or V.shape[1] + block > n:
             break
         X = fs.factor.solve(MQ)
-    require(residual.max() <= max(rtol, 1e-6), f"the lowest {k} modes did not converge (relative residual "
+    require(residual.max() <= max(rtol, 1e-4), f"the lowest {k} modes did not converge (relative residual "
                                                f"{residual.max():.1e} after {V.shape[1]} vectors)")
     frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi)
     log.info("natural frequencies: %s Hz", ", ".join(f"{f:.1f}" for f in frequencies))

@@ -113,60 +113,74 @@ def _evaluate(W: np.ndarray, Y: np.ndarray, steps: np.ndarray, masks: dict):
 
 
 def reduced_history(channels: list[Channel], basis: np.ndarray, coordinates: np.ndarray,
-                    projections: dict | None = None) -> History:
-    """Measures of the history u_n = basis @ coordinates[:, n] (basis (n_dofs, m), full DOFs,
-    orthonormal columns for the bound to hold; any basis when the history is short).
+                    projections: dict | None = None, metric: np.ndarray | None = None) -> History:
+    """Measures of the history u_n = basis @ coordinates[:, n] (basis (n_dofs, m), full DOFs).
 
     ``projections`` maps channel names to ``channel.project(basis)`` when already computed
-    (several loadings in one basis share them).
+    (several loadings in one basis share them). ``metric`` (m, m), symmetric positive
+    definite, adds a second measure of the coordinates' changes to the Euclidean one: the
+    reduced stiffness basisᵀ K basis makes it the strain energy, in which a point's
+    displacement change is bounded tightly when the change is a deflection of the bone
+    (|Δu_x| ≤ √(flexibility at x) · ‖Δu‖_K); the smaller of the two bounds is used.
 
     The series is recorded at the coarse steps c_k. The peak is exact: on an interval
-    (c_k, c_{k+1}) a point's value is at most its larger end value plus ‖W_x‖₂ δ_k, with δ_k
-    the largest distance of the interval's coordinates from the nearer end. Intervals are
-    visited in order of their bound (ends' maximum + max_x ‖W_x‖₂ δ_k) while it exceeds the
-    best value found; in each, only the points whose own bound exceeds it are evaluated at
-    every step.
+    (c_k, c_{k+1}) a point's value is at most its larger end value plus ‖W_x‖ δ_k, with δ_k
+    the largest distance of the interval's coordinates from the nearer end (in each metric,
+    ‖W_x‖ the matching operator norm). Intervals are visited in order of their bound while it
+    exceeds the best value found; in each, only the points whose own bound exceeds it are
+    evaluated at every step.
     """
     Y = np.asarray(coordinates, float)
     n_steps = Y.shape[1]
     coarse = _coarse_steps(n_steps)
-    nearest = np.zeros(n_steps)
-    if len(coarse) < n_steps:
-        lo = coarse[np.searchsorted(coarse, np.arange(n_steps), side="right") - 1]
-        hi = coarse[np.minimum(np.searchsorted(coarse, np.arange(n_steps), side="left"), len(coarse) - 1)]
-        nearest = np.minimum(np.linalg.norm(Y - Y[:, lo], axis=0), np.linalg.norm(Y - Y[:, hi], axis=0))
-    interval_delta = np.array([nearest[a:b + 1].max() for a, b in zip(coarse[:-1], coarse[1:])])
+    refine = len(coarse) < n_steps
+    # each metric as the factor Lᵀ with ‖Lᵀ Δy‖ its norm of Δy
+    factors = [np.eye(Y.shape[0])] + ([np.linalg.cholesky(metric).T] if metric is not None else [])
+    deltas = [_interval_changes(F @ Y, coarse) for F in factors] if refine else []
     measures, refined = {}, {}
     for ch in channels:
         W = projections[ch.name] if projections and ch.name in projections else ch.project(basis)
         masks = ch.all_masks()
         series = _evaluate(W, Y, coarse, masks)
-        gain = _spectral_norms(W) if len(coarse) < n_steps else None
+        # ‖W_x Δy‖ = ‖(W_x L⁻ᵀ)(Lᵀ Δy)‖ ≤ ‖W_x L⁻ᵀ‖ ‖Lᵀ Δy‖
+        gains = [_spectral_norms(W @ np.linalg.inv(F)) for F in factors] if refine else []
         for name, mask in masks.items():
             key = ch.name if name == "all" else f"{ch.name}/{name}"
             values, where = series[name]
             c = int(np.argmax(values))
             best = [float(values[c]), int(coarse[c]), int(where[c])]
             refined[key] = 0
-            if gain is not None:
-                refined[key] = _refine_peak(W[mask], gain[mask], np.flatnonzero(mask), Y, coarse, values,
-                                            interval_delta, best)
+            if refine:
+                sub = np.flatnonzero(mask)
+                refined[key] = _refine_peak(W[sub], [g[sub] for g in gains], sub, Y, coarse, values, deltas, best)
             measures[key] = Measure(key, coarse, values, ch.points[where], best[0], best[1], ch.points[best[2]])
     return History(measures, coarse, refined)
 
 
-def _refine_peak(W, gain, index, Y, coarse, values, delta, best) -> int:
+def _interval_changes(Y: np.ndarray, coarse: np.ndarray) -> np.ndarray:
+    """Per interval between coarse steps, the largest ‖y_n − y_c‖ to its nearer end."""
+    n = Y.shape[1]
+    lo = coarse[np.searchsorted(coarse, np.arange(n), side="right") - 1]
+    hi = coarse[np.minimum(np.searchsorted(coarse, np.arange(n), side="left"), len(coarse) - 1)]
+    nearest = np.minimum(np.linalg.norm(Y - Y[:, lo], axis=0), np.linalg.norm(Y - Y[:, hi], axis=0))
+    return np.array([nearest[a:b + 1].max() for a, b in zip(coarse[:-1], coarse[1:])])
+
+
+def _refine_peak(W, gains, index, Y, coarse, values, deltas, best) -> int:
     """Raise ``best`` = [peak, step, point] to the exact maximum between coarse steps (see
     :func:`reduced_history`); returns how many (point, step) values were evaluated."""
-    bounds = np.maximum(values[:-1], values[1:]) + gain.max() * delta
+    ends_max = np.maximum(values[:-1], values[1:])
+    bounds = np.min([ends_max + g.max() * d for g, d in zip(gains, deltas)], axis=0)
     evaluated = 0
     for k in np.argsort(-bounds):
         if bounds[k] <= best[0]:
             break
         a, b = coarse[k], coarse[k + 1]
+        if b - a < 2:
+            continue
         ends = _norms(W @ Y[:, [a, b]]).max(axis=1)
-        suspects = np.flatnonzero(ends + gain * delta[k] > best[0])
-        if len(suspects) == 0 or b - a < 2:
+        suspects = np.flatnonzero(np.min([ends + g * d[k] for g, d in zip(gains, deltas)], axis=0) > best[0])
+        if len(suspects) == 0:
             continue
         inside = _norms(W[suspects] @ Y[:, a + 1:b])
         evaluated += inside.size

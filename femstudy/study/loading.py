@@ -76,12 +76,15 @@ def dynamic_content(case: Case, cond: DrillingConditions) -> DynamicContent:
 
 
 def resolved_loading(case: Case, loading: CaseLoading, dt_s: float) -> LoadHistory:
-    """The dynamic loading with its oscillation and release, every ``dt_s`` [s] from contact
-    to the end of the case's span or 0.1 s past the release, whichever is later."""
+    """The dynamic loading with its oscillation and release, every ``dt_s`` [s] over the
+    resolved window: from ``analysis.resolved_lead_s`` before breakthrough (or contact) to
+    0.1 s past the release."""
     cond = loading.conditions
     content = dynamic_content(case, cond)
-    end = max(case.time.end_s, cond.phase_times()["breakthrough"] + content.release_s + 0.1)
-    times = np.arange(int(np.floor(end / dt_s + 1e-9)) + 1) * dt_s
+    breakthrough = cond.phase_times()["breakthrough"]
+    start = max(0.0, breakthrough - case.analysis.resolved_lead_s)
+    end = breakthrough + content.release_s + 0.1
+    times = start + np.arange(int(np.floor((end - start) / dt_s + 1e-9)) + 1) * dt_s
     history = evaluate("clogging", cond, times, content)
     k = case.drilling.load_scale
     return replace(history, thrust_N=k * history.thrust_N, torque_Nmm=k * history.torque_Nmm)

@@ -84,7 +84,9 @@ def dynamics_paragraph(dyn: dict, step_s: float) -> str:
             if dyn.get("flute_passing_Hz") else
             f"Lowest natural frequency {f1:.1f} Hz (period {1e3 / f1:.2f} ms) against {step_s:g} s steps.")
     if dyn.get("resolved_steps"):
-        text += (f" A resolved transient ({dyn['resolved_steps']:,} steps of {1e3 * dyn['resolved_step_s']:.3g} ms, "
+        window = dyn.get("resolved_window_s") or (0.0, 0.0)
+        text += (f" A resolved transient from {window[0]:.2f} to {window[1]:.2f} s "
+                 f"({dyn['resolved_steps']:,} steps of {1e3 * dyn['resolved_step_s']:.3g} ms, "
                  f"{dyn['resolved_vectors']} Ritz vectors, error indicator {dyn['resolved_indicator']:.1e}) with the "
                  f"per-flute oscillation and the breakthrough release gives a peak deflection of "
                  f"{dyn['resolved_peak_mm']:.5g} mm against {dyn['quasi_static_peak_mm']:.5g} mm quasi-static: "

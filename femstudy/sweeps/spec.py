@@ -34,21 +34,32 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 from femstudy.casefile import Case, with_overrides
 from femstudy.errors import UserError, require
 from femstudy.schema import parse_toml
-from femstudy.sweep.execute import Point
+from femstudy.sweeps.execute import Point
 
 
-def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list[str]) -> list[Point]:
-    """One point per (size, order, refinement)."""
+#: The remeshed point's envelope differs by this factor: a new TetWild run of the same request.
+REMESH_FACTOR = 1.000001
+
+
+def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list[str],
+                remesh: bool = True) -> list[Point]:
+    """One point per (size, order, refinement); with ``remesh``, the middle size once more
+    with its TetWild envelope changed by one part in a million, so that TetWild meshes the
+    same request again: the two differ by the remeshing noise."""
     require(len(sizes) > 0 and all(s > 0 for s in sizes), f"--sizes must be positive lengths in mm, got {sizes}")
     ratio = case.mesh.site_size_mm / case.mesh.size_mm
     envelope_per_mm = case.mesh.envelope / case.mesh.size_mm
+    ladder = sorted(set(sizes), reverse=True)
+    again = [ladder[len(ladder) // 2]] if remesh and len(ladder) >= 3 else []
     points = []
-    for order, refine, size in itertools.product(orders, refines, sorted(set(sizes), reverse=True)):
-        overrides = {"mesh.size_mm": float(size), "mesh.order": order, "mesh.refine": refine,
-                     "mesh.envelope": min(0.05, round(float(size) * envelope_per_mm, 9))}
-        if refine == "site":
-            overrides["mesh.site_size_mm"] = round(float(size) * ratio, 6)
-        points.append(Point("mesh", overrides, label=f"P{order} {refine} {size:g} mm"))
+    for order, refine in itertools.product(orders, refines):
+        for size, factor in [(s, 1.0) for s in ladder] + [(s, REMESH_FACTOR) for s in again]:
+            overrides = {"mesh.size_mm": float(size), "mesh.order": order, "mesh.refine": refine,
+                         "mesh.envelope": min(0.05, round(float(size) * envelope_per_mm * factor, 12))}
+            if refine == "site":
+                overrides["mesh.site_size_mm"] = round(float(size) * ratio, 6)
+            points.append(Point("mesh", overrides,
+                                label=f"P{order} {refine} {size:g} mm" + (" (remeshed)" if factor != 1 else "")))
     for p in points:  # validate every point before any work
         with_overrides(case, p.overrides)
     return points

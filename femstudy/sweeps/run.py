@@ -1,7 +1,7 @@
 """``sweep``: a mesh-convergence ladder of a case, or a parameter sweep file, run to a folder.
 
 Points run locally one after another, in a process pool (``workers``) or on a Dask cluster
-(``scheduler``), resumably (femstudy.sweep.execute). With several workers the femur meshes
+(``scheduler``), resumably (femstudy.sweeps.execute). With several workers the femur meshes
 are built here first, so that workers read them from ``cache_dir`` (TetWild is not
 deterministic) and so that each point's memory is known from its DOFs.
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 from femstudy import atomic
 from femstudy.errors import UserError, require
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
-from femstudy.sweep import report
+from femstudy.sweeps import report
 
 log = logging.getLogger(__name__)
 
@@ -101,8 +101,8 @@ def sweep(file: Path, sizes: list[float] | None = None, *, order: str = "2", ref
 
 
 def _execute(points, case, case_path: Path, folder: Path, options: dict, runs=None):
-    from femstudy.sweep import points as point_functions
-    from femstudy.sweep.execute import execute
+    from femstudy.sweeps import points as point_functions
+    from femstudy.sweeps.execute import execute
 
     memory = None
     if options["workers"] > 1 or options["scheduler"]:  # workers then read the meshes built here
@@ -122,7 +122,7 @@ def _mesh_first(points, case, cache_dir: Path):
     from femstudy.casefile import with_overrides
     from femstudy.study.femur import femur_model
     from femstudy.study.feasibility import factorisation_bytes
-    from femstudy.sweep.points import estimated_dofs
+    from femstudy.sweeps.points import estimated_dofs
 
     need = {}
     for k, point in enumerate(points, 1):
@@ -135,21 +135,22 @@ def _mesh_first(points, case, cache_dir: Path):
 
 def _mesh_sweep(case_path: Path, sizes, order, refine, target, out, options) -> SweepResult:
     from femstudy.casefile import load_case
-    from femstudy.sweep.spec import mesh_points
+    from femstudy.sweeps.spec import mesh_points
 
     case = load_case(case_path, options["bones_dir"])
     orders = [1, 2] if order == "both" else [int(order)]
     refines = ["site", "uniform"] if refine == "both" else [refine]
     points = mesh_points(case, sizes, orders, refines)
     folder = out or Path("results") / f"sweep-{case.name}"
-    rows = [r["result"] for r in _execute(points, case, case_path, folder, options)]
+    rows = [{"point": r["point"]["label"], **r["result"]} for r in _execute(points, case, case_path, folder, options)]
     assessment = report.convergence(rows, target)
     atomic.write_text(folder / "sweep.csv", report.table_csv(rows, report.MESH_COLUMNS))
     atomic.write_text(folder / "convergence.json", json.dumps(assessment, indent=2, default=float))
     figures = report.plots(folder, rows, assessment)
     text = "\n".join([f"# Mesh convergence: {case.name}", "",
                       f"Static solve under the peak dynamic drilling load; site size scaled with the global size. "
-                      f"Sizes {', '.join(f'{s:g}' for s in sorted(set(sizes), reverse=True))} mm.", "",
+                      f"Sizes {', '.join(f'{s:g}' for s in sorted(set(sizes), reverse=True))} mm; the middle size "
+                      "meshed twice (\"remeshed\") to measure TetWild's remeshing noise.", "",
                       report.table_markdown(rows, report.MESH_COLUMNS), "", "## Convergence (three finest meshes)", "",
                       report.convergence_markdown(assessment, target), "",
                       " ".join(f"![{f}]({f})" for f in figures), ""])
@@ -159,7 +160,7 @@ def _mesh_sweep(case_path: Path, sizes, order, refine, target, out, options) -> 
 
 def _parameter_sweep(path: Path, out, options) -> SweepResult:
     from femstudy.casefile import load_case, with_overrides
-    from femstudy.sweep.spec import read_parameter_sweep
+    from femstudy.sweeps.spec import read_parameter_sweep
 
     name, case_path, points = read_parameter_sweep(path)
     case = load_case(case_path, options["bones_dir"])

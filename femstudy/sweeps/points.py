@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from femstudy.casefile import parse_case, with_overrides
-from femstudy.sweep.execute import Point
+from femstudy.sweeps.execute import Point
 
 
 @dataclass(frozen=True)
