@@ -20,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "neural-network neuron study; save the result as a named bone set that "
                                    "'femstudy loads --bone NAME' and case files ([drilling] bone = \"NAME\") use.")
     p.add_argument("runs", nargs="+", type=Path, metavar="RUNS",
-                   help="recordings (CSV) or folders of recordings, at four or more (feed, speed) conditions")
+                   help="recordings (CSV, text exports, .tdms, .mat, .xlsx) or folders of recordings, at four "
+                        "or more (feed, speed) conditions")
     p.add_argument("--name", default="calibrated", help="name of the bone set to save (calibrated)")
     p.add_argument("--out", type=Path, help="folder for tables and figures (results/calibration/NAME); "
                                             "replaced as a whole")
@@ -37,12 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def recording_paths(items: list[Path], option: str) -> list[Path]:
-    """Files as given, folders expanded to their *.csv files (sorted)."""
+    """Files as given, folders expanded to their recordings (.csv, .tsv, .txt, .tdms, .mat, .xlsx; sorted)."""
+    from femstudy.recordings.reader import RECORDING_SUFFIXES
+
     paths = []
     for item in items:
         if item.is_dir():
-            found = sorted(item.glob("*.csv"))
-            require(found, f"{option}: folder {item} has no .csv recordings")
+            found = sorted(p for p in item.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES and p.is_file())
+            require(found, f"{option}: folder {item} has no recordings ({', '.join(RECORDING_SUFFIXES)} files)")
             paths += found
         else:
             require(item.exists(), f"{option}: recording {item} does not exist")
@@ -78,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     recordings = []
     for path in cal_paths + val_paths:
-        rec = read_recording(path, settings, override_header=args.override)
+        rec = read_recording(path, settings, override_header=args.override, columns=args.columns)
         for note in rec.notes:
             if "overrides" in note:
                 console.warn(f"{path.name}: {note}")

@@ -7,6 +7,9 @@ from pathlib import Path
 
 from femstudy.errors import require
 
+#: the formats of femstudy.recordings.reader.WRITE_FORMATS (listed here to keep --help import-free)
+FORMATS = ("csv", "csv-semicolon", "tsv", "decimal-comma", "excel-csv", "dynoware", "tdms", "mat", "mat73", "xlsx")
+
 #: (option, Effects field, parameter, default) of every switchable effect; 0 switches it off.
 EFFECT_OPTIONS = [
     ("--noise-thrust-N", "noise", "thrust_N", 0.3, "Gaussian thrust noise, standard deviation [N]"),
@@ -32,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "data set (--dataset). Every effect and the ground truth go into the "
                                    "header.")
     where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--out", type=Path, help="write one recording (CSV)")
+    where.add_argument("--out", type=Path, help="write one recording (format from --format, else from the suffix)")
     where.add_argument("--dataset", type=Path, metavar="DIR",
                        help="write a calibration data set: Table 4-1 conditions x replicates, plus "
                             "validation runs at the Table 5-3 conditions")
@@ -51,7 +54,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="depth where the feed stops (default cortex + 2 mm; less than the cortex "
                         "ends the cut by retraction)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
-    p.add_argument("--torque-unit", choices=("Nmm", "Nm"), default="Nmm", help="torque column unit (Nmm)")
+    p.add_argument("--format", choices=FORMATS,
+                   help="file format: csv, csv-semicolon, tsv, decimal-comma (';' and ','), excel-csv (also a "
+                        "byte-order mark and CRLF), dynoware (Kistler-like text export), tdms, mat, mat73 (HDF5), "
+                        "xlsx (default: from the --out suffix, else csv)")
+    p.add_argument("--time-unit", default="s", help="time column unit, e.g. s or ms (s)")
+    p.add_argument("--force-unit", default="N", help="thrust column unit, e.g. N, kN or lbf (N)")
+    p.add_argument("--torque-unit", default="Nmm", help="torque column unit, e.g. Nmm, N*m or lbf*in (Nmm)")
     p.add_argument("--depth-column", action="store_true", help="also write the tip depth depth_mm")
     p.add_argument("--clean", action="store_true", help="switch every effect off unless given below")
     effects = p.add_argument_group("effects (0 switches an effect off; drift rates may be negative)")
@@ -99,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         require(args.replicates >= 1, f"--replicates must be at least 1, got {args.replicates}")
         summary = write_dataset(args.dataset, bone=args.bone, replicates=args.replicates,
                                 outliers=args.outliers, seed=args.seed, sample_rate_hz=args.rate_hz,
-                                torque_unit=args.torque_unit, progress=console.progress)
+                                torque_unit=args.torque_unit, format=args.format, progress=console.progress)
         print(summary)
         return 0
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
@@ -108,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
                      mu_w=args.mu_w, u1_MPa=args.u1_mpa, model=args.model, sample_rate_hz=args.rate_hz,
                      approach_s=args.approach_s, stop_depth_mm=args.stop_depth_mm,
                      effects=effects_from_args(args), seed=args.seed, depth_column=args.depth_column)
-    write_recording(args.out, rec, torque_unit=args.torque_unit)
+    write_recording(args.out, rec, args.torque_unit, format=args.format, time_unit=args.time_unit,
+                    force_unit=args.force_unit)
     m = rec.metadata
     print(f"wrote {args.out}: {rec.time_s.size} samples at {args.rate_hz:g} Hz, {rec.duration_s:.2f} s; "
           f"model {m['model']}, mu_f = {m['true_mu_f']:.4f}, mu_w = {m['true_mu_w']:.4f}, "

@@ -27,7 +27,8 @@ import numpy as np
 
 from femstudy import atomic
 from femstudy.drilling.friction import BoneSet, load_bone_set
-from femstudy.recordings.reader import Recording, write_recording
+from femstudy.errors import require
+from femstudy.recordings.reader import FORMAT_SUFFIXES, Recording, write_recording
 from femstudy.recordings.synthetic import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, synthesize
 
 #: Table 4-1 calibration conditions and Table 5-3 validation conditions, (f [mm/s], N [rpm]).
@@ -111,12 +112,16 @@ TRUTH_COLUMNS = ["file", "role", "feed_mm_s", "spindle_rpm", "replicate", "condi
 
 
 def write_dataset(folder, bone: str = "bovine", replicates: int = 10, outliers: int = 3, seed: int = 0,
-                  sample_rate_hz: float = 1000.0, torque_unit: str = "Nmm", progress=None) -> str:
+                  sample_rate_hz: float = 1000.0, torque_unit: str = "Nmm", format: str | None = None,
+                  progress=None) -> str:
     """Write the data set (atomically, as a whole folder) and return a summary to print.
 
-    Layout: ``calibration/*.csv``, ``validation/*.csv``, ``truth.csv`` (per-run ground truth)
+    Layout: ``calibration/*.csv``, ``validation/*.csv`` (or the suffix of ``format``, one of
+    :data:`~femstudy.recordings.reader.WRITE_FORMATS`), ``truth.csv`` (per-run ground truth)
     and ``generating_bone_set.toml`` (the power law the runs were drawn around).
     """
+    require(format is None or format in FORMAT_SUFFIXES,
+            f"unknown recording format '{format}'; choose one of {', '.join(FORMAT_SUFFIXES)}")
     bone_set = load_bone_set(bone)
     runs = dataset_recordings(bone_set, replicates=replicates, outliers=outliers, seed=seed,
                               sample_rate_hz=sample_rate_hz)
@@ -124,8 +129,10 @@ def write_dataset(folder, bone: str = "bovine", replicates: int = 10, outliers: 
     writer = csv.writer(truth, lineterminator="\n")
     writer.writerow(TRUTH_COLUMNS)
     with atomic.atomic_folder(folder) as tmp:
+        suffix = FORMAT_SUFFIXES[format or "csv"]
         for k, (relative, rec) in enumerate(runs):
-            write_recording(tmp / relative, rec, torque_unit=torque_unit)
+            relative = str(Path(relative).with_suffix(suffix))
+            write_recording(tmp / relative, rec, torque_unit, format=format or "csv")
             m = rec.metadata
             writer.writerow([relative] + [m[c] if not isinstance(m[c], float) else f"{m[c]:.6g}"
                                           for c in TRUTH_COLUMNS[1:]])

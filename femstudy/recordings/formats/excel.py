@@ -9,7 +9,6 @@ Metadata are the header block's rows and the ``key | value`` rows of a sheet nam
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -30,11 +29,15 @@ def read_table(path: Path, source: str) -> Table:
     import openpyxl
 
     try:
-        book = openpyxl.load_workbook(path, read_only=True, data_only=True)
-        sheets = {ws.title: [list(row) for row in ws.iter_rows(values_only=True)] for ws in book.worksheets}
-        book.close()
-    except (zipfile.BadZipFile, KeyError, ValueError, OSError, TypeError) as exc:
-        raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({exc})") from None
+        with path.open("rb") as stream:  # a stream, so that openpyxl does not insist on the suffix
+            book = openpyxl.load_workbook(stream, read_only=True, data_only=True)
+            sheets = {ws.title: [list(row) for row in ws.iter_rows(values_only=True)] for ws in book.worksheets}
+            book.close()
+    except OSError:
+        raise
+    except Exception as exc:  # openpyxl raises BadZipFile, KeyError, InvalidFileException ... on a damaged file
+        raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({type(exc).__name__}: "
+                        f"{exc})") from None
     titles = {t.lower(): t for t in sheets}
     data_title = next((titles[t] for t in DATA_SHEETS if t in titles), next(iter(sheets), None))
     rows = sheets.get(data_title) or []
