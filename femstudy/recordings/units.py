@@ -93,6 +93,8 @@ def factor_to_solver(unit_text: str, quantity: str, subject: str) -> float:
     1000.0
     """
     target, dimension, examples = QUANTITY_UNITS[quantity]
+    if normalise_unit(unit_text) == target:
+        return 1.0  # femstudy's own unit: nothing to convert, and no need to load pint's registry
     unit = parse_unit(unit_text)
     if unit is None:
         raise UserError(f"{subject} has unit '{unit_text}', which is not a unit femstudy knows; {quantity} needs "

@@ -69,7 +69,7 @@ def _load(arrays, names, indices: list[int], source: str) -> list[np.ndarray]:
     require(len(set(sizes.values())) <= 1,
             f"recording {source}: its channels differ in length (" +
             ", ".join(f"'{n}' {s} samples" for n, s in sizes.items()) + "); femstudy needs one sample of each "
-            "per time step")
+            "per time step (is the file truncated?)")
     return out
 
 
