@@ -318,3 +318,20 @@ def test_clean_recordings_survive_every_format(tmp_path):
         write_recording(tmp_path / f"c{FORMAT_SUFFIXES[fmt]}", rec, format=fmt)
         back = read_recording(tmp_path / f"c{FORMAT_SUFFIXES[fmt]}")
         np.testing.assert_allclose(back.thrust_N, rec.thrust_N, rtol=1e-5, atol=1e-9, err_msg=fmt)
+
+
+def test_synth_writes_a_recording_and_a_data_set_in_another_format(tmp_path):
+    from femstudy import cli
+    from femstudy.commands.calibrate import recording_paths
+
+    assert cli.main(["synth", "--out", str(tmp_path / "one"), "--format", "xlsx", "--time-unit", "ms",
+                     "--force-unit", "kN", "--torque-unit", "N*m", "--rate-hz", "200", "--quiet"]) == 0
+    rec = read_recording(tmp_path / "one")
+    assert "Fz converted from kN to N (x1000)" not in rec.notes  # .xlsx names it 'thrust [kN]'
+    assert "thrust [kN] converted from kN to N (x1000)" in rec.notes
+    assert cli.main(["synth", "--dataset", str(tmp_path / "set"), "--replicates", "1", "--outliers", "0",
+                     "--rate-hz", "200", "--format", "mat", "--quiet"]) == 0
+    found = recording_paths([tmp_path / "set" / "calibration"], "RUNS")
+    assert len(found) == 5 and all(p.suffix == ".mat" for p in found)
+    assert "calibration/f1_N1000_r01.mat" in (tmp_path / "set" / "truth.csv").read_text()
+    assert read_recording(found[0]).metadata["role"] == "calibration"
