@@ -33,6 +33,12 @@ def assert_same_recording(back, rec, time_rtol, load_rtol):
         np.testing.assert_allclose(got, want, rtol=load_rtol, atol=load_rtol * np.max(np.abs(want)), err_msg=name)
 
 
+def test_synth_offers_every_format():
+    from femstudy.commands import synth
+
+    assert set(synth.FORMATS) == set(WRITE_FORMATS) == set(FORMAT_SUFFIXES)
+
+
 @pytest.mark.parametrize("fmt", list(WRITE_FORMATS))
 def test_every_format_reads_back_the_same_samples_and_metadata(tmp_path, original, fmt):
     path = tmp_path / f"rec{FORMAT_SUFFIXES[fmt]}"
@@ -247,6 +253,7 @@ def test_bad_binary_and_spreadsheet_files(tmp_path):
                 [0.002, 3.0]):
         book.active.append(row)
     book.save(tmp_path / "hole.xlsx")
+    scipy.io.savemat(tmp_path / "matrix.mat", {"data": np.column_stack([t, thrust, torque]), "feed_mm_s": 1.5})
     (tmp_path / "fake.xlsx").write_text(HEADER + "time_s,thrust_N\n0,1\n")
     (tmp_path / "fake.tdms").write_text(HEADER + "time_s,thrust_N\n0,1\n")
     (tmp_path / "garbage.mat").write_bytes(b"MATLAB 5.0 MAT-file" + bytes(200))
@@ -257,6 +264,7 @@ def test_bad_binary_and_spreadsheet_files(tmp_path):
         "ragged.tdms": "its channels differ in length ('Time' 600 samples, 'Fz' 595 samples)",
         "scalars.mat": "(MATLAB) has no numeric vector variables; femstudy needs one per column, e.g. t, Fz and Mz "
                        "(variables found: feed_mm_s, spindle_rpm)",
+        "matrix.mat": "(variables found: data, feed_mm_s); save the columns of data as vectors",
         "words.xlsx": "sheet 'Sheet' has no row of numbers",
         "hole.xlsx": "hole.xlsx, row 5: an empty cell in column 'thrust [N]' is not a number",
         "fake.xlsx": "has a .xlsx name but is not an Excel .xlsx workbook",
@@ -298,6 +306,9 @@ def test_unreadable_file_and_folder(tmp_path, monkeypatch):
     with pytest.raises(UserError, match=r"cannot read recording .*r.csv: Permission denied"):
         read_recording(path)
     monkeypatch.undo()
+    (tmp_path / "latin1.csv").write_bytes((HEADER + "time_s,thrust_N\n" + csv_body()).encode() + b"# K\xe9\n1,2\n")
+    with pytest.raises(UserError, match="latin1.csv is not a text \\(UTF-8\\) CSV file"):
+        read_recording(tmp_path / "latin1.csv")  # the bad byte after the first rows
     (tmp_path / "folder.csv").mkdir()
     with pytest.raises(UserError, match="folder.csv is a folder; give one recording file"):
         read_recording(tmp_path / "folder.csv")
@@ -335,3 +346,19 @@ def test_synth_writes_a_recording_and_a_data_set_in_another_format(tmp_path):
     assert len(found) == 5 and all(p.suffix == ".mat" for p in found)
     assert "calibration/f1_N1000_r01.mat" in (tmp_path / "set" / "truth.csv").read_text()
     assert read_recording(found[0]).metadata["role"] == "calibration"
+
+
+PREFIXES = [b"", b"TDSm", b"PK\x03\x04", b"MATLAB 5.0 MAT-file", b"\x89HDF\r\n\x1a\n", b"\xef\xbb\xbf", b"\xff\xfe"]
+
+
+def test_random_bytes_in_every_format_are_refused_in_one_sentence(tmp_path):
+    """Damaged files of every kind: a UserError, never a traceback."""
+    rng = np.random.default_rng(7)
+    for k in range(150):
+        prefix = PREFIXES[k % len(PREFIXES)]
+        suffix = (".csv", ".tdms", ".xlsx", ".mat", ".txt")[k % 5]
+        path = tmp_path / f"r{k}{suffix}"
+        path.write_bytes(prefix + rng.integers(0, 256, int(rng.integers(0, 3000)), dtype=np.uint8).tobytes())
+        with pytest.raises(UserError) as info:
+            read_recording(path, {"feed_mm_s": 1.5, "spindle_rpm": 1500})
+        assert "\n" not in str(info.value)

@@ -157,6 +157,8 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
                   for q, ref in given.items() if q in from_file and from_file[q] != ref]
         channels = assign_channels(table.names, table.units, {**from_file, **given}, name, table.word)
         arrays = table.load([c.index for c in channels])
+    except UnicodeDecodeError:
+        raise UserError(f"recording {name} is not a text (UTF-8) CSV file") from None
     except OSError as exc:
         raise UserError(f"cannot read recording {path}: {exc.strerror or exc}") from None
     values = {c.quantity: a * c.factor for c, a in zip(channels, arrays)}
@@ -164,7 +166,7 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
               f"(x{c.factor:g})" for c in channels if c.factor != 1.0]
     rec = Recording(time_s=values["time"], thrust_N=values["thrust"], torque_Nmm=values.get("torque"),
                     depth_mm=values.get("depth"), fx_N=values.get("fx"), fy_N=values.get("fy"),
-                    metadata=metadata, source=str(path), notes=tuple(table.notes) + tuple(notes))
+                    metadata=metadata, source=str(path), notes=tuple(notes))
     check_recording(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
     return rec
 

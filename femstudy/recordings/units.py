@@ -50,11 +50,9 @@ def normalise_unit(text: str) -> str:
 
 def parse_unit(text: str):
     """The pint unit of ``text``, or None when pint does not read it as a unit."""
-    import pint
-
     try:
         unit = registry().parse_units(normalise_unit(text))
-    except (pint.errors.PintError, AttributeError, TypeError, ValueError, SyntaxError, KeyError):
+    except Exception:  # pint's parser raises PintError, TokenError, AssertionError, ZeroDivisionError ...
         return None
     return None if unit.dimensionless else unit
 

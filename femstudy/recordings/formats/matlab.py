@@ -37,8 +37,10 @@ def read_table(path: Path, source: str) -> Table:
     variables = _read_hdf5(path, source) if hdf5 else _read_classic(path, source)
     columns = {k: v for k, v in variables.items()
                if isinstance(v, np.ndarray) and v.dtype.kind in "fiub" and v.ndim == 1 and v.size > 1}
+    matrices = [k for k, v in variables.items() if isinstance(v, np.ndarray) and v.ndim == 2 and v.dtype.kind in "fiu"]
+    hint = f"; save the columns of {matrices[0]} as vectors" if matrices else ""
     require(columns, f"recording {source} (MATLAB) has no numeric vector variables; femstudy needs one "
-                     f"per column, e.g. t, Fz and Mz (variables found: {', '.join(variables) or 'none'})")
+                     f"per column, e.g. t, Fz and Mz (variables found: {', '.join(variables) or 'none'}){hint}")
     units_struct = variables.get("units") if isinstance(variables.get("units"), dict) else {}
     metadata, origins = {}, {}
     for key, value in variables.items():

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -28,4 +28,3 @@ class Table:
     where: Callable[[int], str]
     how_to_add: str
     word: str = "column"
-    notes: tuple[str, ...] = field(default=())
