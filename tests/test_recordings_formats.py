@@ -137,6 +137,16 @@ def test_european_export_semicolons_decimal_comma_bom_bracketed_units(tmp_path):
     np.testing.assert_allclose(rec.time_s, t, atol=1e-9)
 
 
+def test_excel_unicode_text_utf16_tab_separated(tmp_path):
+    t, thrust, torque = signal()
+    text = "feed_mm_s\t1,5\nspindle_rpm\t1500\nZeit [s]\tFz [N]\tMz [N·mm]\n"
+    text += "".join(f"{a:.4f}\t{b:.6f}\t{c:.6f}\n".replace(".", ",") for a, b, c in zip(t, thrust, torque))
+    (tmp_path / "unicode.txt").write_bytes(text.encode("utf-16"))  # with its byte-order mark
+    rec = read_recording(tmp_path / "unicode.txt")
+    np.testing.assert_allclose(rec.torque_Nmm, torque, atol=1e-6)
+    assert rec.feed_mm_s == 1.5  # a decimal comma in the header block too
+
+
 def test_column_map_names_columns_and_units_from_command_line_and_header(tmp_path):
     t, thrust, torque = signal()
     body = "".join(f"{a * 1000:.3f}\t{b:.6f}\t{c:.6f}\n" for a, b, c in zip(t, thrust, torque))
