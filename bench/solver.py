@@ -137,8 +137,6 @@ class PeakMemory:
 
 def worker(mesh_path: Path, method: str, steps: int, modes: int) -> dict:
     """One (mesh, solver) measurement, in its own process."""
-    import gc
-
     from femstudy.drilling.history import DrillingConditions, evaluate
     from femstudy.fe import (assemble, clamp, drill_patch, factorize, solve_modal, solve_static, solve_transient,
                              step_check)

@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "neural-network neuron study; save the result as a named bone set that "
                                    "'femstudy loads --bone NAME' and case files ([drilling] bone = \"NAME\") use.")
     p.add_argument("runs", nargs="+", type=Path, metavar="RUNS",
-                   help="recordings (CSV) or folders of recordings, at four or more (feed, speed) conditions")
+                   help="recordings (CSV, text exports, .tdms, .mat, .xlsx) or folders of recordings, at four "
+                        "or more (feed, speed) conditions")
     p.add_argument("--name", default="calibrated", help="name of the bone set to save (calibrated)")
     p.add_argument("--out", type=Path, help="folder for tables and figures (results/calibration/NAME); "
                                             "replaced as a whole")
@@ -36,7 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from femstudy.recordings.workflow import calibrate
 
     result = calibrate(args.runs, args.validate, name=args.name, out=args.out, holdout=args.holdout,
-                       metadata=parse_settings(args.set), override=args.override, cutoff_hz=args.cutoff_hz,
+                       metadata=parse_settings(args.set), override=args.override, columns=args.columns,
+                       cutoff_hz=args.cutoff_hz,
                        neurons=not args.no_ann, figures=not args.no_figures, bones_dir=args.settings.bones_dir)
     print(result.files["report"])
     print(f"wrote {result.files['folder']}")

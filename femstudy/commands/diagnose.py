@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "(chip clogging, feed pulsation, sensor drift, thermal softening) explain "
                                    "it, fit them and show the fit improve. Reports nothing when nothing is "
                                    "missing. Exit status 0 whatever is found.")
-    p.add_argument("recording", type=Path, metavar="RECORDING.csv", help="the recording (femstudy format)")
+    p.add_argument("recording", type=Path, metavar="RECORDING",
+                   help="the recording: CSV/TSV/text export, .tdms, .mat or .xlsx (docs/recordings.md)")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--simulation", type=Path, metavar="SIM.csv",
                       help="a simulated trace in the recording format, on the recording's clock "
@@ -48,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
     require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
-    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override)
+    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override,
+                         columns=args.columns)
     for note in rec.notes:
         log.info(note)
     bone = load_bone_set(args.bone, args.settings.bones_dir)

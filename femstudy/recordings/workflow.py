@@ -20,12 +20,15 @@ FIGURES = ("fits.png", "power_law.png", "validation.png", "normality.png", "ann_
 
 
 def recording_paths(items, what: str) -> list[Path]:
-    """Files as given, folders expanded to their *.csv files (sorted); names must be unique."""
+    """Files as given, folders expanded to their recordings (any suffix in
+    :data:`~femstudy.recordings.reader.RECORDING_SUFFIXES`, sorted); names must be unique."""
+    from femstudy.recordings.reader import RECORDING_SUFFIXES
+
     paths = []
     for item in map(Path, items):
         if item.is_dir():
-            found = sorted(item.glob("*.csv"))
-            require(found, f"{what}: folder {item} has no .csv recordings")
+            found = sorted(p for p in item.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES and p.is_file())
+            require(found, f"{what}: folder {item} has no recordings ({', '.join(RECORDING_SUFFIXES)} files)")
             paths += found
         else:
             require(item.exists(), f"{what}: recording {item} does not exist")
@@ -37,7 +40,8 @@ def recording_paths(items, what: str) -> list[Path]:
 
 
 def calibrate(runs, validate=(), *, name: str = "calibrated", out: Path | None = None, holdout: int = 2,
-              metadata: dict | None = None, override: bool = False, cutoff_hz: float | None = None,
+              metadata: dict | None = None, override: bool = False, columns: str | dict | None = None,
+              cutoff_hz: float | None = None,
               neurons: bool = True, figures: bool = True, bones_dir: Path | None = None) -> CalibrationResult:
     """Calibrate the chip-evacuation model's friction on recordings and save the bone set.
 
@@ -54,6 +58,9 @@ def calibrate(runs, validate=(), *, name: str = "calibrated", out: Path | None =
     metadata, override
         Metadata for every recording (``{"spindle_rpm": 1500}``) and whether it wins over a
         recording's own header.
+    columns : str or dict, optional
+        Which file columns hold time, thrust and torque, e.g. ``"time=Zeit,thrust=Fz,torque=Mz"``
+        (see :func:`~femstudy.recordings.reader.read_recording`).
     cutoff_hz : float, optional
         Low-pass cut-off [Hz] (default from the feed, Table 4-4).
     neurons, figures : bool
@@ -92,7 +99,7 @@ def calibrate(runs, validate=(), *, name: str = "calibrated", out: Path | None =
 
     recordings = []
     for path in cal_paths + val_paths:
-        rec = read_recording(path, metadata or {}, override_header=override)
+        rec = read_recording(path, metadata or {}, override_header=override, columns=columns)
         for note in rec.notes:
             if "overrides" in note:
                 log.warning("%s: %s", path.name, note)
