@@ -56,6 +56,9 @@ def mesh_parameters(case, size_mm: float, with_site: bool = True) -> dict:
     site refinement's values when ``with_site`` is false (the TetWild stage's key)."""
     g = case.geometry.model_dump(mode="json")
     g.pop("surface")
+    # a file with several bodies is meshed only with bodies = "largest", and a file with one
+    # is meshed alike either way: the setting never tells two meshes apart
+    g.pop("bodies")
     m = case.mesh
     params = {"geometry": g, "size_mm": size_mm, "envelope": m.envelope}
     if with_site and m.refine == "site":
@@ -74,10 +77,9 @@ def build_femur_model(case, console: Console | None = None, mesh_size_mm: float 
     if not size > 0:
         raise UserError(f"mesh size must be positive, got {size:g} mm")
     path = _surface_file(case)
-    from femstudy.meshing.surface import file_digest
+    from femstudy.meshing.surface import check_surface_file, file_digest
 
-    if not path.is_file():
-        raise UserError(f"surface file {path} does not exist")
+    check_surface_file(path)
     digest = file_digest(path)
     key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(case, size)})
     start = time.perf_counter()
@@ -128,7 +130,7 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     from femstudy.meshing import regions, surface, tetra
     from femstudy.meshing.frame import build_frame
 
-    raw = surface.read_surface(path)
+    raw = surface.read_surface(path, case.geometry.bodies)
     frame, _ = build_frame(raw.points, raw.triangles, case.geometry)
     console.progress(f"surface: {len(raw.triangles)} triangles, units {frame.units} "
                      f"(x{frame.scale_to_mm:g} to mm), {frame.side} femur, length {frame.length_mm:.1f} mm"
