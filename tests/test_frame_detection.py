@@ -73,6 +73,7 @@ def test_find_sphere_measures_the_coverage_of_a_cap(height_fraction):
     fit = find_sphere(x, n, a, (12, 40), 4.0)
     assert fit.radius == pytest.approx(r, rel=0.01) and np.linalg.norm(fit.centre) < 0.2
     assert fit.coverage == pytest.approx(height_fraction, abs=0.03) and fit.rms < 0.1
+    assert find_sphere(x[:0], n[:0], a[:0], (12, 40), 4.0) is None  # nothing left to search
 
 
 # -- the ends of real femurs -----------------------------------------------------------

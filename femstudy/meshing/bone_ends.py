@@ -7,11 +7,11 @@ radii 3-8 % of the length), then for a second one away from the first:
 * a **femoral head** is a cap of radius 3.5-7 % of the length (18-28 mm on an adult femur
   of 400-480 mm) fitting within 5 % of its radius (rms) and covering at least 40 % of its
   sphere; on the femurs measured it covers 46-87 %, while the best cap at the knee covers
-  14-35 % (docs/meshing.md);
+  15-39 % (docs/meshing.md);
 * a **pair of condyles** is two caps of similar coverage (the smaller at least 60 % of the
   larger) side by side: centres within 3 % of the length of each other along the axis and
   3.5-20 % of it apart across it. At the hip the second cap (the greater trochanter, the
-  neck) covers 24-39 % of what the head does.
+  neck) covers 26-39 % of what the head does, while condyles cover alike (78-103 %).
 
 The proximal end is the one with a head whose coverage is at least 1.5 times the other
 end's best; failing that, the end opposite the only pair of condyles. When the two cues

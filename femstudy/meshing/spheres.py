@@ -10,7 +10,7 @@
   the centre is within ``band`` × r of the radius and whose normal points away from the
   centre within ``cone_deg``, until the kept set settles. The cap with the largest
   *coverage* — kept area over the whole sphere's area 4πr² — wins: a femoral head shows
-  0.45-0.9 of its sphere, a condyle 0.15-0.35 (docs/meshing.md).
+  0.46-0.87 of its sphere, the best cap at a knee 0.15-0.39 (docs/meshing.md).
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def find_sphere(centres: np.ndarray, normals: np.ndarray, areas: np.ndarray, rad
     >>> round(fit.radius), fit.coverage > 0.95
     (20, True)
     """
-    step = -(-len(centres) // max_samples)
+    step = max(1, -(-len(centres) // max_samples))
     x, n = np.asarray(centres, float)[::step], np.asarray(normals, float)[::step]
     a = np.asarray(areas, float)[::step] * step
     r_lo, r_hi = radius_range
