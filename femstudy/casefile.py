@@ -67,9 +67,12 @@ class CanalSpec(_Section):
 
 
 class GeometrySpec(_Section):
-    """The bone surface and how to read it."""
+    """The bone surface and how to read it. ``bodies``: a file holding several separate
+    bodies (a femur exported with its patella, loose fragments) is refused with their sizes
+    (``"one"``) or meshed by its largest body (``"largest"``)."""
 
     surface: str = "builtin"
+    bodies: Literal["one", "largest"] = "one"
     units: Literal["auto", "mm", "cm", "m", "in"] = "auto"
     long_axis: Union[Literal["auto"], Vector3] = "auto"
     anterior: Union[Literal["auto"], Vector3] = "auto"
@@ -311,13 +314,18 @@ def check_references(case: Case, bones_dir: Path | None = None) -> None:
     """Fail now, before any work, if the surface file or the bone set (looked up in
     ``bones_dir`` besides the built-in ones) does not exist."""
     from femstudy.drilling.friction import load_bone_set
+    from femstudy.meshing.surface import check_surface_file
 
     where = str(case.source) if case.source else "<case>"
     surface = case.surface_path()
-    if surface is not None and not surface.is_file():
-        line = key_line(case.source.read_text(encoding="utf-8"), ["geometry", "surface"]) if case.source else None
-        raise UserError(f"{where}{f':{line}' if line else ''}: geometry.surface: {surface} does not exist "
-                        f"(paths are relative to the case file's folder; use \"builtin\" for the built-in femur)")
+    if surface is not None:
+        try:
+            check_surface_file(surface)
+        except UserError as exc:
+            line = key_line(case.source.read_text(encoding="utf-8"), ["geometry", "surface"]) if case.source else None
+            hint = (" (paths are relative to the case file's folder; use \"builtin\" for the built-in femur)"
+                    if not surface.exists() else "")
+            raise UserError(f"{where}{f':{line}' if line else ''}: geometry.surface: {exc}{hint}") from None
     try:
         load_bone_set(case.drilling.bone, bones_dir)
     except UserError as exc:

@@ -13,7 +13,8 @@
   ``cache_hit`` and ``cache_key``.
 
 Modules: :mod:`.builtin_femur` (the default bone), :mod:`.surface` (reading and checking),
-:mod:`.frame` (units and anatomical axes), :mod:`.regions` (cortex, canal, cancellous),
+:mod:`.frame` (units and anatomical axes), :mod:`.bone_ends` (femoral head and condyles),
+:mod:`.spheres` (sphere fit and spherical caps), :mod:`.regions` (cortex, canal, cancellous),
 :mod:`.tetra` (TetWild, classification, quality), :mod:`.landmarks`, :mod:`.cache`,
 :mod:`.report` (files and the cut-away picture). docs/meshing.md explains the choices.
 """

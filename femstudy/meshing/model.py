@@ -78,6 +78,9 @@ def mesh_parameters(spec: FemurSpec, size_mm: float, with_site: bool = True) -> 
     refinement's values when ``with_site`` is false (the TetWild stage's key)."""
     g = spec.geometry.model_dump(mode="json")
     g.pop("surface", None)
+    # a file with several bodies is meshed only with bodies = "largest", and a file with one
+    # is meshed alike either way: the setting never tells two meshes apart
+    g.pop("bodies", None)
     m = spec.mesh
     params = {"geometry": g, "size_mm": size_mm, "envelope": m.envelope}
     if with_site and m.refine == "site":
@@ -109,10 +112,9 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
         raise UserError(f"mesh size must be positive, got {size:g} mm")
     cache_dir = Path(cache_dir)
     path = surface_file(spec, cache_dir)
-    from femstudy.meshing.surface import file_digest
+    from femstudy.meshing.surface import check_surface_file, file_digest
 
-    if not path.is_file():
-        raise UserError(f"surface file {path} does not exist")
+    check_surface_file(path)
     digest = file_digest(path)
     key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size)})
     start = time.perf_counter()
@@ -164,7 +166,7 @@ def _build(spec: FemurSpec, path: Path, size: float) -> tuple[dict, dict]:
     from femstudy.meshing import regions, surface, tetra
     from femstudy.meshing.frame import build_frame
 
-    raw = surface.read_surface(path)
+    raw = surface.read_surface(path, spec.geometry.bodies)
     frame, _ = build_frame(raw.points, raw.triangles, spec.geometry)
     log.info("surface: %d triangles, units %s (x%g to mm), %s femur, length %.1f mm%s", len(raw.triangles),
              frame.units, frame.scale_to_mm, frame.side, frame.length_mm,
