@@ -27,7 +27,7 @@ from bench.hole_sizes import add_femur_arguments, femur_hole  # noqa: E402
 from femstudy.fe import assemble, von_mises  # noqa: E402
 from femstudy.hole import (facet_indices, facet_nodes, hole_loads, node_dofs, offset_samples,  # noqa: E402
                            point_probe, solve_prescribed)
-from femstudy.sweep.convergence import assess  # noqa: E402
+from femstudy.sweeps.convergence import assess  # noqa: E402
 
 LOADS = ("cutting_thrust", "cutting_torque", "evacuation_torque")
 
@@ -47,7 +47,7 @@ def main() -> None:
         start = time.perf_counter()
         hole = build(level)
         station = hole.at_station(k)
-        system = assemble(station.mesh, case.materials, order=2)
+        system = assemble(station.mesh, case.materials.to_fe(), order=2)
         loads = hole_loads(system, station, growth_exponent=args.growth)
         cut = node_dofs(facet_nodes(system, facet_indices(system, station.cut_faces))).ravel()
         u = solve_prescribed(system, cut, np.zeros(len(cut)), np.column_stack([getattr(loads, n) for n in LOADS]))

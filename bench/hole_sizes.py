@@ -24,10 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from femstudy.casefile import load_case  # noqa: E402
 from femstudy.fe import assemble  # noqa: E402
-from femstudy.hole import (HoleFrame, Resolution, facet_indices, facet_nodes, hole_mesh, node_dofs,  # noqa: E402
-                           solve_prescribed)
+from femstudy.hole import (HoleFrame, Resolution, facet_indices, facet_nodes, factorize_prescribed,  # noqa: E402
+                           hole_mesh, node_dofs)
 from femstudy.hole.femur import femur_columns  # noqa: E402
-from femstudy.meshing import build_femur_model  # noqa: E402
+from femstudy.study.femur import femur_model  # noqa: E402
 from femstudy.meshing.landmarks import outer_faces  # noqa: E402
 
 
@@ -48,7 +48,7 @@ def add_femur_arguments(parser: argparse.ArgumentParser) -> None:
 def femur_hole(args):
     """(case, a function refinement → HoleMesh, station tip depths) for the case's femur."""
     case = load_case(args.case)
-    model = build_femur_model(case)
+    model = femur_model(case)
     frame = HoleFrame.along(model.site.entry_point, model.site.direction)
     columns = femur_columns(model.mesh, outer_faces(model.mesh, model.frame), frame, args.depth_cap)
     diameter, angle = case.drill.diameter_mm, case.drill.point_angle_deg
@@ -83,12 +83,11 @@ def main() -> None:
         if args.solve:
             station = hole.at_station(hole.n_stations - 1)
             start = time.perf_counter()
-            system = assemble(station.mesh, case.materials, order=2)
+            system = assemble(station.mesh, case.materials.to_fe(), order=2)
             assembled = time.perf_counter() - start
             cut = facet_nodes(system, facet_indices(system, station.cut_faces))
             dofs = node_dofs(cut).ravel()
-            solve_prescribed(system, dofs, np.zeros(len(dofs)), np.zeros(system.n_dofs))
-            factor = [v for k, v in system.cache.items() if k[1] == "K-factor"][0]
+            factor = factorize_prescribed(system, dofs).fs.factor
             planned = getattr(factor, "planned_bytes", None)
             memory = f", factor {planned / 2**30:.2f} GiB planned" if planned else ""
             print(f"  deepest station: {system.n_dofs:,} DOFs, assembly {assembled:.1f} s, {factor.describe()}{memory}")

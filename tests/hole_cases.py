@@ -25,7 +25,7 @@ CONE = RADIUS / np.tan(np.radians(POINT_ANGLE) / 2)
 
 def assemble_model(mesh, order: int):
     """The one place the tests turn a mesh into an FE system (materials: Table 3-1 cortex)."""
-    return assemble(mesh, MaterialsSpec(), order=order)
+    return assemble(mesh, MaterialsSpec().to_fe(), order=order)
 
 
 @lru_cache(maxsize=None)

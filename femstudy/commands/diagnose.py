@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "(chip clogging, feed pulsation, sensor drift, thermal softening) explain "
                                    "it, fit them and show the fit improve. Reports nothing when nothing is "
                                    "missing. Exit status 0 whatever is found.")
-    p.add_argument("recording", type=Path, metavar="RECORDING.csv", help="the recording (femstudy format)")
+    p.add_argument("recording", type=Path, metavar="RECORDING",
+                   help="the recording: CSV/TSV/text export, .tdms, .mat or .xlsx (docs/recordings.md)")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--simulation", type=Path, metavar="SIM.csv",
                       help="a simulated trace in the recording format, on the recording's clock "
@@ -38,20 +39,21 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from femstudy.console import Console
+    import logging
     from femstudy.diagnosis import inputs, report
     from femstudy.diagnosis.diagnose import diagnose
     from femstudy.drilling.friction import load_bone_set
     from femstudy.recordings import read_recording
 
-    console = Console(args.quiet)
+    log = logging.getLogger("femstudy.diagnosis")
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
     require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
-    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override)
+    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override,
+                         columns=args.columns)
     for note in rec.notes:
-        console.progress(note)
-    bone = load_bone_set(args.bone)
+        log.info(note)
+    bone = load_bone_set(args.bone, args.settings.bones_dir)
     if args.simulation:
         sim = inputs.read_simulation(args.simulation, rec)
         cortex = inputs.cortex_thickness(rec, args.cortex_mm)
@@ -59,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         sim, cortex = inputs.model_simulation(rec, args.model, bone, args.cortex_mm)
         label = f"load model '{args.model}' (bone set '{bone.name}'), contact at {sim.contact_s:.3f} s"
-    console.progress(f"read {rec.name} ({rec.time_s.size} samples) and the simulation ({label})")
-    d = diagnose(rec, sim, cortex, bone, progress=console.progress)
+    log.info(f"read {rec.name} ({rec.time_s.size} samples) and the simulation ({label})")
+    d = diagnose(rec, sim, cortex, bone, progress=log.info)
     summary = report.summary_text(d, label)
     print(summary)
     if args.json:
@@ -72,5 +74,5 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         report.write_report(args.report, d, summary)
         print(f"wrote {args.report}/report.md")
-    console.progress(f"diagnosed in {d.seconds:.2f} s")
+    log.info(f"diagnosed in {d.seconds:.2f} s")
     return 0

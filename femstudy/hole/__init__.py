@@ -21,17 +21,18 @@ Typical use::
     station = hole.at_station(k)
     system = assemble(station.mesh, materials, order=2)
     loads = hole_loads(system, station, growth_exponent=p)
-    u = solve_prescribed(system, cut_dofs, cut_values, loads.patterns)
+    u = factorize_prescribed(system, cut_dofs).solve(cut_values, loads.patterns)
     stress = point_probe(system, offset_samples(station, 1.0).points).stress(u)
 """
 
-from femstudy.hole.dirichlet import facet_indices, facet_nodes, node_dofs, solve_prescribed
+from femstudy.hole.dirichlet import (PrescribedSystem, facet_indices, facet_nodes, factorize_prescribed, node_dofs,
+                                     solve_prescribed)
 from femstudy.hole.frame import HoleFrame
 from femstudy.hole.loads import HoleLoads, facet_quadrature, hole_loads
 from femstudy.hole.mesh import CUT_LABELS, LABELS, HoleMesh, HoleStation, Resolution, hole_mesh
 from femstudy.hole.probe import PointProbe, point_probe
 from femstudy.hole.samples import OffsetSamples, offset_samples
 
-__all__ = ["facet_indices", "facet_nodes", "node_dofs", "solve_prescribed", "HoleFrame", "HoleLoads",
+__all__ = ["PrescribedSystem", "facet_indices", "facet_nodes", "factorize_prescribed", "node_dofs", "solve_prescribed", "HoleFrame", "HoleLoads",
            "facet_quadrature", "hole_loads", "CUT_LABELS", "LABELS", "HoleMesh", "HoleStation", "Resolution",
            "hole_mesh", "PointProbe", "point_probe", "OffsetSamples", "offset_samples"]

@@ -1,19 +1,22 @@
 """Static solves with prescribed (non-zero) displacements, the boundary condition of a submodel.
 
 With the DOFs split into free (f) and prescribed (p) sets, K_ff u_f = f_f − K_fp u_p and
-u_p = ū. K_ff is factorised once per prescribed set (cached on the system by
-:func:`femstudy.fe.static.stiffness_factor`), so every load pattern and every prescribed field
-of one station costs a forward/backward substitution. Units: mm, N.
+u_p = ū. :func:`factorize_prescribed` factorises K_ff once per prescribed set
+(:func:`femstudy.fe.static.factorize`) and keeps K_fp, so every load pattern and every
+prescribed field of one station costs a forward/backward substitution. Units: mm, N.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+import scipy.sparse as sp
 
 from femstudy.errors import require
 from femstudy.fe.constraints import Constraints
 from femstudy.fe.loads import _facet_nodes
-from femstudy.fe.static import stiffness_factor
+from femstudy.fe.static import FactorizedSystem, factorize
 
 
 def facet_indices(system, faces: np.ndarray) -> np.ndarray:
@@ -58,17 +61,79 @@ def node_dofs(nodes: np.ndarray, components=(0, 1, 2)) -> np.ndarray:
     return 3 * np.asarray(nodes)[:, None] + np.asarray(components)[None, :]
 
 
-def solve_prescribed(system, dofs: np.ndarray, values: np.ndarray, forces: np.ndarray | None = None,
-                     method: str = "auto") -> np.ndarray:
-    """Displacements u [mm] with u[dofs] = values and nodal ``forces`` [N] on the other DOFs.
+@dataclass(frozen=True, eq=False)
+class PrescribedSystem:
+    """A model with a set of DOFs prescribed, K_ff factorised once.
+
+    fs   : the :class:`~femstudy.fe.static.FactorizedSystem` (``fs.bc.fixed`` the prescribed DOFs, sorted)
+    K_fp : the coupling block K[free, fixed] [N/mm]
+    """
+
+    fs: FactorizedSystem
+    K_fp: sp.csr_matrix
+
+    @property
+    def dofs(self) -> np.ndarray:
+        """The prescribed DOFs, sorted (the row order of ``values`` in :meth:`solve`)."""
+        return self.fs.bc.fixed
+
+    def solve(self, values: np.ndarray, forces: np.ndarray | None = None) -> np.ndarray:
+        """Displacements u [mm] with u[dofs] = values (rows in :attr:`dofs` order) and nodal
+        ``forces`` [N] elsewhere; values (m,) or (m, k), forces (n_dofs,) or (n_dofs, k)."""
+        system, bc = self.fs.system, self.fs.bc
+        values = np.asarray(values, float)
+        require(values.shape[0] == len(bc.fixed), f"{values.shape[0]} prescribed values for {len(bc.fixed)} DOFs")
+        columns = values.shape[1:]
+        forces = np.zeros((system.n_dofs,) + columns) if forces is None else np.asarray(forces, float)
+        require(forces.shape[0] == system.n_dofs, f"forces have {forces.shape[0]} rows for {system.n_dofs} DOFs")
+        if forces.ndim > values.ndim:
+            values = np.repeat(values[:, None], forces.shape[1], axis=1)
+        elif values.ndim > forces.ndim:
+            forces = np.repeat(forces[:, None], values.shape[1], axis=1)
+        u = np.zeros_like(forces)
+        u[bc.fixed] = values
+        u[bc.free] = self.fs.factor.solve(forces[bc.free] - self.K_fp @ values)
+        return u
+
+
+def factorize_prescribed(system, dofs: np.ndarray, solver: str = "auto") -> PrescribedSystem:
+    """Factorise K_ff with ``dofs`` prescribed (the submodel's cut boundary).
 
     Parameters
     ----------
     system : :class:`femstudy.fe.FESystem`
     dofs : (m,) distinct DOF numbers to prescribe (enough to remove rigid-body motion)
-    values : (m,) or (m, k) their displacements [mm]
+    solver : "auto" or a linear solver of :data:`femstudy.fe.linsolve.METHODS`
+
+    Returns
+    -------
+    PrescribedSystem
+
+    Example
+    -------
+    >>> ps = factorize_prescribed(system, cut_dofs)                # doctest: +SKIP
+    >>> u = ps.solve(exact(system.nodes).ravel()[ps.dofs], loads)  # doctest: +SKIP
+    """
+    dofs = np.asarray(dofs, dtype=np.int64).ravel()
+    fixed = np.sort(dofs)
+    require(len(np.unique(fixed)) == len(fixed), "a DOF is prescribed twice")
+    free = np.setdiff1d(np.arange(system.n_dofs), fixed)
+    fs = factorize(system, Constraints(fixed, free, np.empty(0, np.int64)), solver)
+    return PrescribedSystem(fs, system.K[free][:, fixed].tocsr())
+
+
+def solve_prescribed(system, dofs: np.ndarray, values: np.ndarray, forces: np.ndarray | None = None,
+                     solver: str = "auto") -> np.ndarray:
+    """One solve with prescribed displacements: :func:`factorize_prescribed` then
+    :meth:`PrescribedSystem.solve` (factorise once and reuse it for several solves).
+
+    Parameters
+    ----------
+    system : :class:`femstudy.fe.FESystem`
+    dofs : (m,) distinct DOF numbers to prescribe
+    values : (m,) or (m, k) their displacements [mm], in the order of ``dofs``
     forces : (n_dofs,) or (n_dofs, k) nodal forces [N]; default none
-    method : linear solver (:func:`femstudy.fe.linsolve.factorize`)
+    solver : linear solver (:func:`femstudy.fe.linsolve.factorize`)
 
     Returns
     -------
@@ -79,25 +144,6 @@ def solve_prescribed(system, dofs: np.ndarray, values: np.ndarray, forces: np.nd
     >>> u = solve_prescribed(system, dofs, exact(system.nodes).ravel()[dofs])  # doctest: +SKIP
     """
     dofs = np.asarray(dofs, dtype=np.int64).ravel()
-    order = np.argsort(dofs)
-    fixed = dofs[order]
-    require(len(np.unique(fixed)) == len(fixed), "a DOF is prescribed twice")
     values = np.asarray(values, float)
     require(values.shape[0] == len(dofs), f"{values.shape[0]} prescribed values for {len(dofs)} DOFs")
-    values = values[order]
-    columns = values.shape[1:]
-    forces = np.zeros((system.n_dofs,) + columns) if forces is None else np.asarray(forces, float)
-    require(forces.shape[0] == system.n_dofs, f"forces have {forces.shape[0]} rows for {system.n_dofs} DOFs")
-    if forces.ndim > values.ndim:
-        values = np.repeat(values[:, None], forces.shape[1], axis=1)
-    elif values.ndim > forces.ndim:
-        forces = np.repeat(forces[:, None], values.shape[1], axis=1)
-    free = np.setdiff1d(np.arange(system.n_dofs), fixed)
-    bc = Constraints(fixed, free, np.empty(0, np.int64))
-    key = (bc.key, "K_fp")
-    if key not in system.cache:
-        system.cache[key] = system.K[free][:, fixed].tocsr()
-    u = np.zeros_like(forces)
-    u[fixed] = values
-    u[free] = stiffness_factor(system, bc, method).solve(forces[free] - system.cache[key] @ values)
-    return u
+    return factorize_prescribed(system, dofs, solver).solve(values[np.argsort(dofs)], forces)
