@@ -108,13 +108,15 @@ def _locate(system, points: np.ndarray):
     return element, xi, invJ
 
 
-def point_probe(system, points: np.ndarray) -> PointProbe:
+def point_probe(system, points: np.ndarray, element: np.ndarray | None = None) -> PointProbe:
     """Locate ``points`` in the system's mesh and build the point operators.
 
     Parameters
     ----------
     system : :class:`femstudy.fe.FESystem` (P1 or P2)
     points : (n, 3) points [mm]
+    element : (n,) optional, the element of each point, used as given (its fields are
+        extended polynomially to a point just outside it) instead of locating the points
 
     Returns
     -------
@@ -126,7 +128,11 @@ def point_probe(system, points: np.ndarray) -> PointProbe:
     >>> p.stress(u)[0]  # σxx, σyy, σzz, σyz, σxz, σxy [MPa]  # doctest: +SKIP
     """
     points = np.atleast_2d(np.asarray(points, float))
-    element, xi, invJ = _locate(system, points)
+    if element is None:
+        element, xi, invJ = _locate(system, points)
+    else:
+        element = np.asarray(element, dtype=np.int64)
+        xi, invJ, _ = _reference_coordinates(system, element, points)
     inside = element >= 0
     if (~inside).any():
         log.info("%d of %d probe points lie outside the mesh", np.sum(~inside), len(points))

@@ -105,3 +105,43 @@ def offset_samples(station, distance_mm: float, spacing_mm: float | None = None)
         local.append(np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(n, zeta)]))
         part.append(np.full(n, k))
     return OffsetSamples(delta, spacing, hole.frame.to_global(np.concatenate(local)), np.concatenate(part))
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances of 2-D points p (n, 2) from the segment a–b."""
+    ab = b - a
+    t = np.clip((p - a) @ ab / (ab @ ab), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+
+
+def hole_distance(station, points: np.ndarray) -> np.ndarray:
+    """Distance [mm] of each point from the hole of ``station`` (0 inside it).
+
+    In a half-plane through the axis (r, ζ) the hole is {r ≤ R, ζ ≤ s + (R − r) cot(β/2)}; a
+    point outside it is nearest to the wall line r = R above the corner (R, s) or to the cone
+    segment from the corner to the tip (0, s + l) (module docstring).
+
+    Parameters
+    ----------
+    station : :class:`femstudy.hole.mesh.HoleStation` (index ≥ 0)
+    points : (n, 3) points [mm]
+
+    Returns
+    -------
+    (n,) distances [mm]
+
+    Example
+    -------
+    >>> far = hole_distance(station, quadrature_points) > 2.0  # doctest: +SKIP
+    """
+    require(station.index >= 0, "the distance from the hole needs a drilled station (index ≥ 0)")
+    hole = station.hole
+    R, l, s = hole.radius_mm, hole.cone_length_mm, station.corner_depth_mm
+    half = np.radians(hole.point_angle_deg) / 2
+    local = hole.frame.to_local(np.atleast_2d(np.asarray(points, float)))
+    rz = np.column_stack([np.hypot(local[:, 0], local[:, 1]), local[:, 2]])
+    inside = (rz[:, 0] <= R) & ((rz[:, 0] - R) * np.cos(half) + (rz[:, 1] - s) * np.sin(half) <= 0)
+    corner, tip = np.array([R, s]), np.array([0.0, s + l])
+    above = np.array([R, min(s, float(rz[:, 1].min())) - 1.0])  # the wall reaches above every point
+    distance = np.minimum(_segment_distance(rz, above, corner), _segment_distance(rz, corner, tip))
+    return np.where(inside, 0.0, distance)

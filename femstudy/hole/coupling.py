@@ -1,0 +1,82 @@
+"""The submodel's boundary data: global displacements at the local model's cut-face nodes.
+
+Each cut-face node (vertices and P2 mid-nodes of the ``cut_lateral`` and ``cut_bottom`` faces)
+is located in the global mesh by :func:`femstudy.hole.probe.point_probe` and takes the global
+field's value there, u(x) = Σ_a N_a(ξ) u_a. A node that lies just outside the global mesh —
+the local top's columns are ray-cast on the global surface, so rim nodes sit on its facets to
+round-off, and P2 mid-nodes of the local top's chords a little outside its curved facets —
+takes the value at its closest point on the global mesh, in the closest cell; farther than ``tolerance_mm`` away it is a user error (the submodel leaves the bone).
+Units: mm.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from femstudy.errors import require
+from femstudy.hole.dirichlet import facet_indices, facet_nodes, node_dofs
+from femstudy.hole.probe import point_probe
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CutBoundary:
+    """The prescribed DOFs of a station and the global fields there.
+
+    dofs   : (3 m,) sorted DOF numbers of the m cut-face nodes (x, y, z per node)
+    values : (3 m, k) their displacements [mm] for each of the k global fields
+    moved_mm : largest distance a node was moved onto the global mesh [mm] (0: none)
+    """
+
+    dofs: np.ndarray
+    values: np.ndarray
+    moved_mm: float
+
+
+def cut_boundary(global_system, fields: np.ndarray, local_system, station, tolerance_mm: float = 0.5) -> CutBoundary:
+    """Global displacement fields at the cut-face nodes of a station's local model.
+
+    Parameters
+    ----------
+    global_system : :class:`femstudy.fe.FESystem` of the femur (no hole)
+    fields : (n_dofs_global, k) global displacement fields [mm]
+    local_system : :class:`femstudy.fe.FESystem` assembled on ``station.mesh``
+    station : :class:`femstudy.hole.mesh.HoleStation`
+    tolerance_mm : how far outside the global mesh a cut node may lie
+
+    Returns
+    -------
+    CutBoundary
+
+    Example
+    -------
+    >>> cut = cut_boundary(system, unit_fields, local, station)        # doctest: +SKIP
+    >>> u = factorize_prescribed(local, cut.dofs).solve(cut.values)  # doctest: +SKIP
+    """
+    import pyvista as pv
+
+    fields = np.asarray(fields, float).reshape(global_system.n_dofs, -1)
+    nodes = facet_nodes(local_system, facet_indices(local_system, station.cut_faces))
+    points = local_system.nodes[nodes].copy()
+    probe = point_probe(global_system, points)
+    moved = 0.0
+    outside = probe.outside
+    element = probe.element.copy()
+    if len(outside):
+        mesh = global_system.mesh
+        grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.t.T}, mesh.p.T)
+        cell, nearest = grid.find_closest_cell(points[outside], return_closest_point=True)
+        distance = np.linalg.norm(nearest - points[outside], axis=1)
+        moved = float(distance.max())
+        require(moved <= tolerance_mm, f"the local model's cut boundary reaches {moved:.2f} mm outside the femur "
+                                       f"mesh (more than {tolerance_mm} mm): reduce the submodel radius or depth cap")
+        points[outside], element[outside] = nearest, cell
+        log.info("%d of %d cut nodes moved onto the femur mesh (at most %.3g mm)", len(outside), len(points), moved)
+        probe = point_probe(global_system, points, element)
+    values = probe.displacement(fields)  # (m, k, 3)
+    values = np.moveaxis(values, -1, 1).reshape(3 * len(nodes), -1)  # rows (node, component)
+    return CutBoundary(node_dofs(nodes).ravel(), values, moved)

@@ -1,0 +1,176 @@
+"""Stress measures of a solved station: at stated distances from the hole, and outside an
+exclusion zone around it.
+
+* **At distance δ** (:func:`distance_measures`): over the points at δ from the hole surface
+  (:func:`femstudy.hole.samples.offset_samples`, every azimuth and depth), the largest von
+  Mises stress and where it is, the largest and smallest principal stresses and strains, and
+  the smallest strength ratio (:mod:`femstudy.failure`: Tsai–Wu for cortical bone about the
+  long axis, von Mises against the mean strength for cancellous bone). Points outside the
+  bone (above the top, in the canal) are skipped.
+* **Outside an exclusion radius ρ** (:func:`exclusion_measures`): the same over the
+  stiffness quadrature points of the station farther than ρ from the hole surface, excluding
+  points within ``cut_margin_mm`` of a cut-face node (there the local solution is the
+  interpolated global data) and points within the clamped length of either end of the femur.
+
+Stresses are the elements' own P2 fields at the points (σ = D B u_e), strains ε = D⁻¹σ
+(tensor strains for the principal values). Units: mm, MPa, strain [-].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio
+from femstudy.fe.post import quadrature_points, stress_projection, von_mises
+from femstudy.femur_model import CORTICAL
+from femstudy.hole.samples import hole_distance, offset_samples
+
+#: Measure kinds: at a distance from the hole wall, or the maximum outside an exclusion radius.
+KINDS = ("distance", "exclusion")
+
+
+@dataclass(frozen=True)
+class HoleMeasure:
+    """Stress measures of one loading over one point set of one station.
+
+    loading : "dynamic" or "static"; station : station number; tip_depth_mm : its drill-tip depth
+    kind : "distance" (points at ``radius_mm`` from the hole) or "exclusion" (farther than it)
+    von_mises_MPa, location_mm : the largest von Mises stress and its point (global frame)
+    location_distance_mm : that point's distance from the hole surface
+    max_principal_stress_MPa, min_principal_stress_MPa : extreme principal stresses
+    max_principal_strain, min_principal_strain : extreme principal strains [-]
+    strength_ratio : smallest load factor to failure (femstudy.failure) over the set
+    points : how many points of the set lie in bone
+    """
+
+    loading: str
+    station: int
+    tip_depth_mm: float
+    kind: str
+    radius_mm: float
+    von_mises_MPa: float
+    location_mm: tuple
+    location_distance_mm: float
+    max_principal_stress_MPa: float
+    min_principal_stress_MPa: float
+    max_principal_strain: float
+    min_principal_strain: float
+    strength_ratio: float
+    points: int
+
+    def row(self) -> dict:
+        """A flat dict, units in the keys."""
+        out = {k: v for k, v in self.__dict__.items() if k != "location_mm"}
+        out.update({f"location_{a}_mm": float(x) for a, x in zip("xyz", self.location_mm)})
+        return out
+
+
+def _tensor(voigt: np.ndarray, shear_factor: float) -> np.ndarray:
+    s = np.asarray(voigt, float)
+    t = np.empty(s.shape[:-1] + (3, 3))
+    t[..., 0, 0], t[..., 1, 1], t[..., 2, 2] = s[..., 0], s[..., 1], s[..., 2]
+    t[..., 1, 2] = t[..., 2, 1] = shear_factor * s[..., 3]
+    t[..., 0, 2] = t[..., 2, 0] = shear_factor * s[..., 4]
+    t[..., 0, 1] = t[..., 1, 0] = shear_factor * s[..., 5]
+    return t
+
+
+def _measures(stress, D, region, points, distance, long_axis, context: dict, loadings) -> list[HoleMeasure]:
+    """Measures of stresses (n, k, 6) at points (n, 3) with element stiffnesses D (n, 6, 6)."""
+    if len(points) == 0:
+        return [HoleMeasure(name, **context, von_mises_MPa=np.nan, location_mm=(np.nan,) * 3,
+                            location_distance_mm=np.nan, max_principal_stress_MPa=np.nan,
+                            min_principal_stress_MPa=np.nan, max_principal_strain=np.nan,
+                            min_principal_strain=np.nan, strength_ratio=np.nan, points=0) for name in loadings]
+    strain = np.linalg.solve(D[:, None], stress[..., None])[..., 0]  # ε = D⁻¹σ, engineering shear
+    principal_stress = np.linalg.eigvalsh(_tensor(stress, 1.0))
+    principal_strain = np.linalg.eigvalsh(_tensor(strain, 0.5))
+    vm = von_mises(stress)  # (n, k)
+    cortical = region == CORTICAL
+    ratio = np.where(cortical[:, None], cortical_strength_ratio(stress, long_axis), cancellous_strength_ratio(vm))
+    out = []
+    for j, name in enumerate(loadings):
+        at = int(np.argmax(vm[:, j]))
+        out.append(HoleMeasure(name, **context, von_mises_MPa=float(vm[at, j]), location_mm=tuple(map(float, points[at])),
+                               location_distance_mm=float(distance[at]),
+                               max_principal_stress_MPa=float(principal_stress[:, j, -1].max()),
+                               min_principal_stress_MPa=float(principal_stress[:, j, 0].min()),
+                               max_principal_strain=float(principal_strain[:, j, -1].max()),
+                               min_principal_strain=float(principal_strain[:, j, 0].min()),
+                               strength_ratio=float(ratio[:, j].min()), points=len(points)))
+    return out
+
+
+def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",)
+                      ) -> list[HoleMeasure]:
+    """Measures over the points at each distance δ from the hole (module docstring).
+
+    Parameters
+    ----------
+    system : :class:`femstudy.fe.FESystem` assembled on ``station.mesh``
+    station : :class:`femstudy.hole.mesh.HoleStation`
+    u : (n_dofs, k) displacements [mm], one column per loading
+    distances_mm : distances δ from the hole surface [mm]
+    long_axis : (3,) the bone's long axis (cortical strength frame)
+    loadings : k names of the columns of ``u``
+
+    Returns
+    -------
+    list of :class:`HoleMeasure`, loadings fastest
+
+    Example
+    -------
+    >>> distance_measures(system, station, u, (0.5, 1.0), model.frame.up)  # doctest: +SKIP
+    """
+    from femstudy.hole.probe import point_probe
+
+    u = np.asarray(u, float).reshape(system.n_dofs, -1)
+    out = []
+    for delta in distances_mm:
+        probe = point_probe(system, offset_samples(station, delta).points)
+        keep = probe.inside
+        e = probe.element[keep]
+        stress = probe.stress(u)[keep]  # (n, k, 6)
+        D = system.materials.D[system.materials.index[e]]
+        context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": "distance",
+                   "radius_mm": float(delta)}
+        out += _measures(stress, D, system.region[e], probe.points[keep], np.full(len(e), float(delta)), long_axis,
+                         context, loadings)
+    return out
+
+
+def exclusion_measures(system, station, u: np.ndarray, radii_mm, long_axis, excluded: np.ndarray,
+                       loadings=("dynamic",)) -> list[HoleMeasure]:
+    """Measures over the quadrature points farther than each radius ρ from the hole.
+
+    Parameters
+    ----------
+    system, station, u, long_axis, loadings : as :func:`distance_measures`
+    radii_mm : exclusion radii ρ [mm]
+    excluded : (n_tets, nq) True at quadrature points never counted (near the cut faces, in a clamp zone)
+
+    Returns
+    -------
+    list of :class:`HoleMeasure`, loadings fastest
+
+    Example
+    -------
+    >>> exclusion_measures(system, station, u, (1.0, 2.0), axis, np.zeros((system.n_tets, 4), bool))  # doctest: +SKIP
+    """
+    u = np.asarray(u, float).reshape(system.n_dofs, -1)
+    nq = len(system.ref.weights)
+    points = quadrature_points(system).reshape(-1, 3)
+    stress = stress_projection(system, u).reshape(len(points), 6, -1).transpose(0, 2, 1)  # (n, k, 6)
+    distance = hole_distance(station, points)
+    element = np.repeat(np.arange(system.n_tets), nq)
+    D_all = system.materials.D[system.materials.index[element]]
+    out = []
+    for rho in radii_mm:
+        keep = (distance > rho) & ~np.asarray(excluded).ravel()
+        context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": "exclusion",
+                   "radius_mm": float(rho)}
+        out += _measures(stress[keep], D_all[keep], system.region[element[keep]], points[keep], distance[keep],
+                         long_axis, context, loadings)
+    return out

@@ -1,0 +1,247 @@
+"""Stresses near the drilled hole of a femur: the global model drives local hole models.
+
+One-way submodelling (docs/hole.md). The global femur model (no hole) is solved for a unit
+thrust and a unit torque on its surface patch; its displacement under the loading at a
+station's tip depth is Σ amplitude × unit field. At each of a few depth stations the local
+column model around the drill axis (:mod:`femstudy.hole.mesh`, the hole drilled to that tip
+depth) takes those displacements on its cut faces (:mod:`femstudy.hole.coupling`) and the
+drill's loads on its hole — cutting thrust and torque on the cone, the chip-evacuation torque
+as wall friction and its thrust on the bottom (:mod:`femstudy.hole.loads`) — with the same
+resultants as the patch. Each station costs one assembly and one factorisation; its loadings
+(dynamic: the clogging model at that depth; static: Allotta's full-engagement load, all of it
+cutting) are two right-hand sides. The measures (:mod:`femstudy.hole.measures`) are taken at
+stated distances from the hole wall and outside exclusion radii. Units: mm, N, N·mm, MPa, s.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from femstudy.drilling import allotta, evaluate
+from femstudy.errors import require
+from femstudy.hole.coupling import cut_boundary
+from femstudy.hole.dirichlet import factorize_prescribed
+from femstudy.hole.femur import femur_columns
+from femstudy.hole.frame import HoleFrame
+from femstudy.hole.loads import hole_loads
+from femstudy.hole.measures import HoleMeasure, distance_measures, exclusion_measures
+from femstudy.hole.mesh import Resolution, hole_mesh
+
+log = logging.getLogger(__name__)
+
+LOADINGS = ("dynamic", "static")
+
+
+@dataclass(frozen=True)
+class HoleOptions:
+    """How the hole models are built and measured (lengths in mm).
+
+    stations : number of depth stations, tips at k/n of the deepest tip (k = 1..n)
+    ligament_mm : bone left ahead of the deepest tip along the axis (the deepest tip is the
+        drilled depth or the cortex along the axis, whichever is less, minus this: breakthrough
+        itself, a vanishing ligament, is a fracture problem, not a stress measure)
+    distances_mm : distances from the hole surface of the measures
+    exclusion_radii_mm : exclusion radii of the sensitivity table; ``exclusion_radius_mm`` the quoted one
+    headline_distance_mm : the distance whose von Mises stress a report quotes
+    refinement : :class:`femstudy.hole.mesh.Resolution` refinement (1: 0.3 mm at the wall)
+    submodel_radius_mm, depth_cap_mm : extent of the local model (radius about the axis, depth below the top)
+    cut_margin_mm : quadrature points this close to a cut-face node are not in the exclusion measures
+    """
+
+    stations: int = 3
+    ligament_mm: float = 0.5
+    distances_mm: tuple = (0.5, 1.0, 2.0, 5.0)
+    exclusion_radii_mm: tuple = (0.5, 1.0, 2.0, 3.0, 4.0)
+    exclusion_radius_mm: float = 1.0
+    headline_distance_mm: float = 1.0
+    refinement: float = 1.0
+    submodel_radius_mm: float = 8.0
+    depth_cap_mm: float = 12.0
+    cut_margin_mm: float = 2.0
+
+
+@dataclass(frozen=True)
+class StationRun:
+    """One station: its loads, its size and cost.
+
+    tip_depth_mm, time_s : the drill tip's depth and the time the dynamic loading reaches it
+    cutting_thrust_N, cutting_torque_Nmm, evacuation_thrust_N, evacuation_torque_Nmm : dynamic amplitudes
+    dofs : P2 DOFs of the local model; cut_dofs : of them prescribed
+    seconds : mesh station + assembly + factorisation + solves + measures [s]
+    moved_mm : largest distance a cut node was moved onto the femur mesh
+    """
+
+    station: int
+    tip_depth_mm: float
+    time_s: float
+    cutting_thrust_N: float
+    cutting_torque_Nmm: float
+    evacuation_thrust_N: float
+    evacuation_torque_Nmm: float
+    dofs: int
+    cut_dofs: int
+    seconds: float
+    moved_mm: float
+
+
+@dataclass(frozen=True)
+class HoleResult:
+    """Hole-based stresses of a study (docs/hole.md).
+
+    options : :class:`HoleOptions`
+    stations : one :class:`StationRun` per station
+    measures : every :class:`HoleMeasure` (loading × station × distance or exclusion radius)
+    static_load : (thrust_N, torque_Nmm) of the static loading
+    mesh_seconds : time to build the column mesh [s]
+    """
+
+    options: HoleOptions
+    stations: tuple
+    measures: tuple
+    static_load: tuple
+    mesh_seconds: float
+
+    def worst(self, kind: str, radius_mm: float, loading: str = "dynamic") -> HoleMeasure:
+        """The station with the largest von Mises stress for one kind, radius and loading."""
+        found = [m for m in self.measures if m.kind == kind and m.loading == loading
+                 and abs(m.radius_mm - radius_mm) < 1e-9 and np.isfinite(m.von_mises_MPa)]
+        require(len(found) > 0, f"no hole measure '{kind}' at {radius_mm} mm for the {loading} loading")
+        return max(found, key=lambda m: m.von_mises_MPa)
+
+    def headline(self, loading: str = "dynamic") -> HoleMeasure:
+        """The quoted stress: the largest von Mises at ``options.headline_distance_mm`` over the stations."""
+        return self.worst("distance", self.options.headline_distance_mm, loading)
+
+    def table(self, kind: str) -> list[dict]:
+        """Per radius: the worst station's measures of both loadings and their ratio (a report row)."""
+        radii = self.options.distances_mm if kind == "distance" else self.options.exclusion_radii_mm
+        rows = []
+        for r in radii:
+            d, s = self.worst(kind, r, "dynamic"), self.worst(kind, r, "static")
+            rows.append({"radius_mm": float(r), "dynamic": d.row(), "static": s.row(),
+                         "ratio_dynamic_to_static": d.von_mises_MPa / s.von_mises_MPa if s.von_mises_MPa > 0 else None})
+        return rows
+
+    def rows(self) -> list[dict]:
+        """Every measure as a flat dict (units in the keys), for CSV."""
+        return [m.row() for m in self.measures]
+
+    def to_json(self) -> dict:
+        """Options, stations, the distance and exclusion tables, and the headline measure."""
+        from femstudy.jsonable import jsonable
+
+        return jsonable({"options": dict(self.options.__dict__), "stations": [dict(s.__dict__) for s in self.stations],
+                         "static_load": {"thrust_N": self.static_load[0], "torque_Nmm": self.static_load[1]},
+                         "mesh_s": self.mesh_seconds,
+                         "distance": self.table("distance"), "exclusion": self.table("exclusion"),
+                         "headline": {"distance_mm": self.options.headline_distance_mm,
+                                      "dynamic": self.headline("dynamic").row(),
+                                      "static": self.headline("static").row()}})
+
+
+def station_amplitudes(cond, tip_depth_mm: float, scale: float = 1.0) -> tuple[float, float, float, float, float]:
+    """(time [s], cutting thrust [N], cutting torque [N·mm], evacuation thrust [N], evacuation
+    torque [N·mm]) of the dynamic ("clogging") loading when the tip is at ``tip_depth_mm``:
+    cutting = Allotta's thrust and torque of the engaged cone, evacuation = the clogging
+    model's total minus the cutting part (femstudy.drilling.history)."""
+    t = tip_depth_mm / cond.feed_mm_s
+    total = evaluate("clogging", cond, np.array([t]))
+    a, h, drill, bone = cond.feed_per_rev_mm, cond.cortex_mm, cond.drill, cond.bone
+    d = np.array([tip_depth_mm])
+    F_cut = float(allotta.thrust(d, a, h, bone.u1_MPa, bone.u2_MPa, drill)[0])
+    T_cut = float(allotta.torque(d, a, h, bone.u1_MPa, bone.u2_MPa, drill)[0])
+    F, T = float(total.thrust_N[0]), float(total.torque_Nmm[0])
+    return t, scale * F_cut, scale * T_cut, scale * (F - F_cut), scale * (T - T_cut)
+
+
+def station_tips(options: HoleOptions, drilled_depth_mm: float, cortex_mm: float) -> np.ndarray:
+    """Tip depths [mm] of the stations: k/n of the deepest tip (:class:`HoleOptions`)."""
+    deepest = min(drilled_depth_mm, cortex_mm) - options.ligament_mm
+    require(deepest > 0, f"no bone to drill: depth {drilled_depth_mm:g} mm, cortex {cortex_mm:g} mm, "
+                         f"ligament {options.ligament_mm:g} mm")
+    return deepest * np.arange(1, options.stations + 1) / options.stations
+
+
+def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options: HoleOptions = HoleOptions(),
+                  solver: str = "auto") -> HoleResult:
+    """Stresses near the drilled hole at a few depth stations, driven by the global model.
+
+    Parameters
+    ----------
+    case : :class:`femstudy.casefile.Case` (drill, materials, clamps)
+    model : :class:`femstudy.meshing.FemurModel` the global femur (no hole)
+    system : :class:`femstudy.fe.FESystem` assembled on ``model.mesh``
+    unit_fields : (n_dofs, 2) global displacements [mm] under a unit patch thrust [1 N] and torque [1 N·mm]
+    loading : :class:`femstudy.study.loading.CaseLoading` (conditions, static load)
+    options : :class:`HoleOptions`
+    solver : linear solver of the local models
+
+    Returns
+    -------
+    HoleResult
+
+    Example
+    -------
+    >>> fields = fs.bc.expand(fs.factor.solve(patch.patterns[fs.bc.free]))           # doctest: +SKIP
+    >>> result = hole_stresses(case, model, system, fields, case_loading(case, 6.0))  # doctest: +SKIP
+    >>> result.headline().von_mises_MPa                                               # doctest: +SKIP
+    """
+    from femstudy.fe import assemble
+    from femstudy.meshing.landmarks import outer_faces
+
+    require(options.stations >= 1, f"the hole needs at least one station, got {options.stations}")
+    cond = loading.conditions
+    scale = case.drilling.load_scale
+    tips = station_tips(options, loading.depth_mm, model.site.cortical_thickness_mm)
+    start = time.perf_counter()
+    frame = HoleFrame.along(model.site.entry_point, model.site.direction)
+    columns = femur_columns(model.mesh, outer_faces(model.mesh, model.frame), frame, options.depth_cap_mm)
+    hole = hole_mesh(frame, case.drill.diameter_mm, case.drill.point_angle_deg, options.submodel_radius_mm, tips,
+                     columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement))
+    mesh_seconds = time.perf_counter() - start
+    log.info("hole model: %d stations (tips %s mm), column mesh %.1f s", len(tips),
+             ", ".join(f"{t:.2f}" for t in tips), mesh_seconds)
+    materials = case.materials.to_fe()
+    up = np.asarray(model.frame.up, float)
+    heights = model.mesh.points @ up
+    clamp = case.clamps.length_mm
+    static = (float(loading.static_thrust_N), float(loading.static_torque_Nmm))
+    runs, measures = [], []
+    for k, tip in enumerate(tips):
+        start = time.perf_counter()
+        station = hole.at_station(k)
+        local = assemble(station.mesh, materials, order=case.mesh.order, long_axis=up)
+        t, F_cut, T_cut, F_evac, T_evac = station_amplitudes(cond, float(tip), scale)
+        amplitudes = np.array([[F_cut + F_evac, T_cut + T_evac], list(static)]).T  # (2 patch loads, 2 loadings)
+        cut = cut_boundary(system, unit_fields, local, station)
+        patterns = hole_loads(local, station, growth_exponent=cond.growth_exponent)
+        forces = np.column_stack([patterns.force(F_cut, T_cut, T_evac, F_evac), patterns.force(*static)])
+        u = factorize_prescribed(local, cut.dofs, solver).solve(cut.values @ amplitudes, forces)
+        measures += distance_measures(local, station, u, options.distances_mm, up, LOADINGS)
+        excluded = _excluded(local, cut.dofs, heights, up, clamp, options.cut_margin_mm)
+        measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, up, excluded, LOADINGS)
+        seconds = time.perf_counter() - start
+        runs.append(StationRun(k, float(tip), t, F_cut, T_cut, F_evac, T_evac, local.n_dofs, len(cut.dofs), seconds,
+                               cut.moved_mm))
+        log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
+    return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds)
+
+
+def _excluded(local, cut_dofs: np.ndarray, heights: np.ndarray, up: np.ndarray, clamp_mm: float,
+              margin_mm: float) -> np.ndarray:
+    """(n_tets, nq) True at quadrature points within ``margin_mm`` of a cut-face node or within
+    the clamped length of either end of the femur (heights along ``up``)."""
+    from scipy.spatial import cKDTree
+
+    from femstudy.fe.post import quadrature_points
+
+    points = quadrature_points(local)
+    flat = points.reshape(-1, 3)
+    near_cut = cKDTree(local.nodes[np.unique(cut_dofs // 3)]).query(flat, distance_upper_bound=margin_mm)[0] <= margin_mm
+    h = flat @ up
+    in_clamp = (h > heights.max() - clamp_mm) | (h < heights.min() + clamp_mm)
+    return (near_cut | in_clamp).reshape(points.shape[:2])
