@@ -186,6 +186,45 @@ class DrillingSpec(_Section):
     breakthrough_release_s: Union[Literal["flute"], Annotated[float, Field(gt=0, le=10)]] = "flute"
 
 
+class LoadsSpec(_Section):
+    """Where the drill's loads act. ``application = "hole"`` (the default): the global model
+    drives local models of the drilled hole at ``stations`` depth stations, with the cutting
+    loads on the drill-point cone and the chip evacuation as wall friction, and the report
+    quotes the stresses at ``distances_mm`` from the hole wall (``headline_distance_mm`` the
+    headline) and the maximum outside exclusion radii (docs/hole.md). ``"surface_patch"``:
+    the loads on a disk of the outer surface only, for comparison with the thesis's point-like
+    loading (its peak stress under the patch is mesh-dependent). ``refinement``,
+    ``submodel_radius_mm`` and ``depth_cap_mm`` set the local model's mesh and extent."""
+
+    application: Literal["hole", "surface_patch"] = "hole"
+    stations: int = Field(3, ge=1, le=20)
+    distances_mm: list[PositiveMM] = Field(default_factory=lambda: [0.5, 1.0, 2.0, 5.0], min_length=1)
+    headline_distance_mm: PositiveMM = 1.0
+    exclusion_radii_mm: list[PositiveMM] = Field(default_factory=lambda: [0.5, 1.0, 2.0, 3.0, 4.0], min_length=1)
+    exclusion_radius_mm: PositiveMM = 1.0
+    refinement: float = Field(1.0, gt=0, le=4)
+    submodel_radius_mm: float = Field(8.0, gt=2, le=50)
+    depth_cap_mm: PositiveMM = 12.0
+
+    @model_validator(mode="after")
+    def _quoted_values_are_measured(self):
+        if self.headline_distance_mm not in self.distances_mm:
+            raise ValueError(f"headline_distance_mm = {self.headline_distance_mm} is not one of distances_mm")
+        if self.exclusion_radius_mm not in self.exclusion_radii_mm:
+            raise ValueError(f"exclusion_radius_mm = {self.exclusion_radius_mm} is not one of exclusion_radii_mm")
+        return self
+
+    def hole_options(self):
+        """The library's :class:`femstudy.hole.study.HoleOptions`."""
+        from femstudy.hole.study import HoleOptions
+
+        return HoleOptions(stations=self.stations, distances_mm=tuple(self.distances_mm),
+                           exclusion_radii_mm=tuple(self.exclusion_radii_mm),
+                           exclusion_radius_mm=self.exclusion_radius_mm, headline_distance_mm=self.headline_distance_mm,
+                           refinement=self.refinement, submodel_radius_mm=self.submodel_radius_mm,
+                           depth_cap_mm=self.depth_cap_mm)
+
+
 class TimeSpec(_Section):
     end_s: float = Field(3.0, gt=0, le=3600)
     step_s: float = Field(0.1, gt=0)
@@ -234,6 +273,7 @@ class Case(_Section):
     site: SiteSpec = SiteSpec()
     drill: DrillSpec = DrillSpec()
     drilling: DrillingSpec = DrillingSpec()
+    loads: LoadsSpec = LoadsSpec()
     time: TimeSpec = TimeSpec()
     analysis: AnalysisSpec = AnalysisSpec()
     output: OutputSpec = OutputSpec()

@@ -22,6 +22,12 @@ size_mm = 16.0
 order = {order}
 [drilling]
 load_scale = {scale}
+[loads]
+application = "{application}"
+stations = 1
+refinement = 0.5
+distances_mm = [1.0, 2.0]
+exclusion_radii_mm = [1.0, 2.0]
 [time]
 end_s = 3.0
 step_s = {step}
@@ -36,9 +42,9 @@ screenshot = {screenshot}
 
 
 def run(tmp_path, mesh_cache, order=2, scale=1.0, step=0.5, screenshot="true", name="run", fields="true",
-        resolved="false"):
+        resolved="false", application="surface_patch"):
     case = parse_case(CASE.format(order=order, scale=scale, step=step, screenshot=screenshot, fields=fields,
-                                  resolved=resolved))
+                                  resolved=resolved, application=application))
     out = tmp_path / name
     result = run_study(case, out, cache_dir=mesh_cache)
     return result.to_json(), out
@@ -46,7 +52,7 @@ def run(tmp_path, mesh_cache, order=2, scale=1.0, step=0.5, screenshot="true", n
 
 @pytest.fixture(scope="module")
 def p2_run(tmp_path_factory, mesh_cache):
-    return run(tmp_path_factory.mktemp("study"), mesh_cache, resolved="true")
+    return run(tmp_path_factory.mktemp("study"), mesh_cache, resolved="true", application="hole")
 
 
 def test_results_folder_is_complete(p2_run):
@@ -87,6 +93,24 @@ def test_results_are_consistent(p2_run):
     load = summary["loading"]
     assert res["max_deflection_mm"]["ratio_dynamic_to_static"] == pytest.approx(
         load["peak_thrust_N"] / load["static_thrust_N"], rel=0.1)
+
+
+def test_hole_stresses_replace_the_patch_peak(p2_run):
+    """With loads.application = "hole" the report quotes the stresses near the hole, with their
+    distances and exclusion radius, and its margins come from them, not from the patch's peak."""
+    summary, out = p2_run
+    hole = summary["hole"]
+    assert [r["radius_mm"] for r in hole["distance"]] == [1.0, 2.0]
+    near, far = (r["dynamic"]["von_mises_MPa"] for r in hole["distance"])
+    assert near > far > 0  # the hole's stress concentration decays away from the wall
+    for row in hole["distance"] + hole["exclusion"]:
+        assert row["ratio_dynamic_to_static"] > 1  # the clogging loads exceed the static Allotta load
+    assert summary["margins"]["basis"] == "hole"
+    assert all(m["strength_ratio"] > 1 for m in summary["margins"]["dynamic"])
+    text = (out / "report.md").read_text()
+    assert "| von Mises 1 mm from the hole wall [MPa] |" in text
+    assert "| max von Mises beyond 1 mm of the hole wall [MPa] |" in text
+    assert "maximum von Mises stress [MPa]" not in text and "safety factor" not in text
 
 
 def test_fields_are_readable_time_series(p2_run):
@@ -135,7 +159,8 @@ def test_interrupted_run_never_leaves_a_complete_looking_folder(tmp_path, mesh_c
     """kill -9 at several moments: results/<name> is either absent or complete; the next run
     succeeds and reuses the cached mesh."""
     case = tmp_path / "e2e.toml"
-    case.write_text(CASE.format(order=2, scale=1.0, step=0.5, screenshot="true", fields="true", resolved="false"))
+    case.write_text(CASE.format(order=2, scale=1.0, step=0.5, screenshot="true", fields="true", resolved="false",
+                                application="surface_patch"))
     env = {**os.environ, "FEMSTUDY_CACHE": str(mesh_cache), "MPLBACKEND": "Agg"}
     out = tmp_path / "results" / "e2e"
     for delay in (1.0, 4.0, 8.0):

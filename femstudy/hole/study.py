@@ -105,6 +105,11 @@ class HoleResult:
     static_load: tuple
     mesh_seconds: float
 
+    @property
+    def wall_element_mm(self) -> float:
+        """The local model's element size at the hole wall [mm]: its mesh measure for convergence."""
+        return float(Resolution(refinement=self.options.refinement).scaled["wall_mm"])
+
     def worst(self, kind: str, radius_mm: float, loading: str = "dynamic") -> HoleMeasure:
         """The station with the largest von Mises stress for one kind, radius and loading."""
         found = [m for m in self.measures if m.kind == kind and m.loading == loading
@@ -126,6 +131,26 @@ class HoleResult:
                          "ratio_dynamic_to_static": d.von_mises_MPa / s.von_mises_MPa if s.von_mises_MPa > 0 else None})
         return rows
 
+    def margins(self) -> dict:
+        """Failure margins (:mod:`femstudy.failure`: Tsai–Wu strength ratio for cortical bone,
+        von Mises against the mean strength for cancellous bone; docs/failure.md): per loading, the
+        smallest strength ratio over the stations at every distance from the hole and outside the
+        quoted exclusion radius, with the station and point where it occurs."""
+        out = {"basis": "hole", "criterion": "Tsai-Wu (cortical), von Mises / mean strength (cancellous)",
+               "source": "femstudy/failure.py, docs/failure.md"}
+        sets = [("distance", r) for r in self.options.distances_mm] + [("exclusion", self.options.exclusion_radius_mm)]
+        for loading in LOADINGS:
+            rows = []
+            for kind, radius in sets:
+                found = [m for m in self.measures if m.kind == kind and m.loading == loading
+                         and abs(m.radius_mm - radius) < 1e-9 and np.isfinite(m.strength_ratio)]
+                if found:
+                    worst = min(found, key=lambda m: m.strength_ratio)
+                    rows.append({"kind": kind, "radius_mm": float(radius), "strength_ratio": worst.strength_ratio,
+                                 "station": worst.station, "tip_depth_mm": worst.tip_depth_mm})
+            out[loading] = rows
+        return out
+
     def rows(self) -> list[dict]:
         """Every measure as a flat dict (units in the keys), for CSV."""
         return [m.row() for m in self.measures]
@@ -136,8 +161,9 @@ class HoleResult:
 
         return jsonable({"options": dict(self.options.__dict__), "stations": [dict(s.__dict__) for s in self.stations],
                          "static_load": {"thrust_N": self.static_load[0], "torque_Nmm": self.static_load[1]},
-                         "mesh_s": self.mesh_seconds,
+                         "mesh_s": self.mesh_seconds, "wall_element_mm": self.wall_element_mm,
                          "distance": self.table("distance"), "exclusion": self.table("exclusion"),
+                         "margins": self.margins(),
                          "headline": {"distance_mm": self.options.headline_distance_mm,
                                       "dynamic": self.headline("dynamic").row(),
                                       "static": self.headline("static").row()}})

@@ -111,6 +111,9 @@ class StudyResult:
     loading : CaseLoading
     out_dir : Path or None
         The results folder, when one was written.
+    hole : HoleResult or None
+        Stresses near the drilled hole (:func:`femstudy.hole.study.hole_stresses`), when
+        ``case.loads.application == "hole"``.
     """
 
     case: Case
@@ -120,6 +123,7 @@ class StudyResult:
     loading: CaseLoading
     summary: dict
     out_dir: Path | None = None
+    hole: object = None  # femstudy.hole.study.HoleResult when loads.application = "hole"
 
     def to_json(self) -> dict:
         """The summary.json document (inputs, versions, mesh, solver, peaks, ratios, timings)."""
@@ -246,6 +250,12 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         fields = {n: basis @ coords[:, n] for n in keep}
     dynamic = LoadingResult.from_history("dynamic", times, dyn.thrust_N, dyn.torque_Nmm, dynamic_history)
     clock["dynamic"] = time.perf_counter()
+    hole = None
+    if case.loads.application == "hole":  # the global field per unit patch load drives the hole models
+        from femstudy.hole.study import hole_stresses
+
+        hole = hole_stresses(case, model, system, fs.bc.expand(shapes), loading, case.loads.hole_options(), solver)
+    clock["hole"] = time.perf_counter()
 
     dynamics = Dynamics(scheme, vectors, indicator)
     if case.analysis.modes:
@@ -259,8 +269,12 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     clock["resolved"] = time.perf_counter()
 
     summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
+    if hole is not None:  # the hole's measures replace the patch's mesh-dependent peak for margins
+        summary["hole"] = hole.to_json()
+        summary["margins"] = hole.margins()
+    summary["timings"]["hole_s"] = clock["hole"] - clock["dynamic"]
     summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the results
-    result = StudyResult(case, dynamic, static, dynamics, loading, summary, out_dir)
+    result = StudyResult(case, dynamic, static, dynamics, loading, summary, out_dir, hole)
     if out_dir is not None:
         from femstudy.study.output import write_results
 
@@ -328,8 +342,8 @@ def _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
     site = model.site
     timing = {"mesh_s": clock["mesh"] - clock["start"], "assembly_s": clock["assembly"] - clock["mesh"],
               "factor_s": clock["factor"] - clock["assembly"], "dynamic_s": clock["dynamic"] - clock["factor"],
-              "modal_s": clock.get("modal", clock["dynamic"]) - clock["dynamic"],
-              "resolved_s": clock["resolved"] - clock.get("modal", clock["dynamic"])}
+              "modal_s": clock.get("modal", clock["hole"]) - clock["hole"],
+              "resolved_s": clock["resolved"] - clock.get("modal", clock["hole"])}
     return {
         "femstudy_version": __version__, "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "versions": versions(),

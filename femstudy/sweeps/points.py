@@ -79,7 +79,8 @@ def mesh_point(case, cache_dir: Path, solver: str = "auto") -> dict:
     recorder.step(0, u)
     r = recorder.history()
     volume = float(model.stats["tet_volume_mm3"])
-    return {
+    hole = hole_quantities(case, model, system, fs, patch, solver) if case.loads.application == "hole" else {}
+    return {**hole,
         "size_mm": case.mesh.size_mm, "order": case.mesh.order, "refine": case.mesh.refine,
         "site_size_mm": case.mesh.site_size_mm if case.mesh.refine == "site" else None,
         "envelope": case.mesh.envelope,
@@ -92,6 +93,24 @@ def mesh_point(case, cache_dir: Path, solver: str = "auto") -> dict:
         "mesh_cache_hit": bool(model.stats.get("cache_hit")),
         "assembly_s": assembled - meshed, "solve_s": solved - assembled, "solver": fs.method,
     }
+
+
+def hole_quantities(case, model, system, fs, patch, solver: str = "auto") -> dict:
+    """The hole model's element size, largest dynamic von Mises stresses at each distance from
+    the hole wall and beyond the quoted exclusion radius (femstudy.hole.study), and its time."""
+    from femstudy.hole.study import hole_stresses
+    from femstudy.study.loading import case_loading
+
+    start = time.perf_counter()
+    fields = fs.bc.expand(fs.factor.solve(patch.patterns[fs.bc.free]))
+    options = case.loads.hole_options()
+    hole = hole_stresses(case, model, system, fields, case_loading(case, model.site.cortical_thickness_mm), options,
+                         solver)
+    out = {"hole_h_mm": hole.wall_element_mm, "hole_s": time.perf_counter() - start,
+           "hole_von_mises_excl_MPa": hole.worst("exclusion", options.exclusion_radius_mm).von_mises_MPa}
+    for distance in options.distances_mm:
+        out[f"hole_von_mises_{distance:g}mm_MPa"] = hole.worst("distance", distance).von_mises_MPa
+    return out
 
 
 def study_point(case, folder: Path, context: Context) -> dict:

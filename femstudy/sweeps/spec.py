@@ -20,7 +20,9 @@ envelope the surface detail it preserves, not the size, sets the elements near t
 on the built-in femur at envelope 1e-3, sizes 24, 20 and 16 mm all gave 15,800–16,800 P1
 DOFs, while the scaled envelope gives 4,633 tets at 32 mm and 13,558 at 16 mm. The
 convergence assessment uses the representative size h = (V / elements)^(1/3), not the
-nominal one.
+nominal one. With ``loads.application = "hole"`` the drilled-hole model's refinement scales
+the same way (case refinement × case size / point size), so its wall element size — the mesh
+measure of the hole quantities — halves when the global size does.
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list
                          "mesh.envelope": min(0.05, round(float(size) * envelope_per_mm * factor, 12))}
             if refine == "site":
                 overrides["mesh.site_size_mm"] = round(float(size) * ratio, 6)
+            if case.loads.application == "hole":  # the hole model refines with the ladder (docs/hole.md)
+                overrides["loads.refinement"] = round(case.loads.refinement * case.mesh.size_mm / float(size), 6)
             points.append(Point("mesh", overrides,
                                 label=f"P{order} {refine} {size:g} mm" + (" (remeshed)" if factor != 1 else "")))
     for p in points:  # validate every point before any work

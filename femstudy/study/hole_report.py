@@ -1,0 +1,81 @@
+"""The hole-based stresses in ``report.md`` and the study table, rendered from ``summary.json``
+(its "hole" entry, :meth:`femstudy.hole.study.HoleResult.to_json`)."""
+
+from __future__ import annotations
+
+
+def _fmt(value, digits: int = 4) -> str:
+    return "–" if value is None else f"{value:.{digits}g}"
+
+
+def hole_table_rows(hole: dict) -> list[str]:
+    """Rows of the run report's main table: von Mises at the headline distance from the hole
+    wall and outside the quoted exclusion radius, dynamic, static and their ratio (no thesis
+    value: the thesis's stresses are point-load peaks)."""
+    options = hole["options"]
+    picks = [("distance", options["headline_distance_mm"], "von Mises {r:g} mm from the hole wall [MPa]"),
+             ("exclusion", options["exclusion_radius_mm"], "max von Mises beyond {r:g} mm of the hole wall [MPa]")]
+    lines = []
+    for kind, radius, label in picks:
+        row = next(r for r in hole[kind] if abs(r["radius_mm"] - radius) < 1e-9)
+        d, s = row["dynamic"], row["static"]
+        lines.append(f"| {label.format(r=radius)} | {_fmt(d['von_mises_MPa'])} (tip {d['tip_depth_mm']:.2f} mm) | "
+                     f"{_fmt(s['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} | – | – | – |")
+    return lines
+
+
+def hole_section(hole: dict) -> list[str]:
+    """The hole's stations, the stresses at each distance from the wall, the exclusion-radius
+    sensitivity and the failure margins, as Markdown lines."""
+    options = hole["options"]
+    lines = ["**Stresses near the drilled hole** (docs/hole.md): the global model drives local models of the "
+             f"hole at {len(hole['stations'])} depth stations (radius {options['submodel_radius_mm']:g} mm, "
+             f"refinement {options['refinement']:g}); cutting thrust and torque on the drill-point cone, chip "
+             "evacuation torque as wall friction and its thrust on the bottom. Maxima over the stations and over "
+             "every point at the stated distance from the hole surface (wall and cone).", "",
+             "| station | tip depth [mm] | time [s] | cutting thrust [N] | cutting torque [N·mm] | evacuation thrust [N] "
+             "| evacuation torque [N·mm] | DOFs | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
+    for s in hole["stations"]:
+        lines.append(f"| {s['station']} | {s['tip_depth_mm']:.2f} | {s['time_s']:.2f} | {s['cutting_thrust_N']:.1f} | "
+                     f"{s['cutting_torque_Nmm']:.1f} | {s['evacuation_thrust_N']:.1f} | {s['evacuation_torque_Nmm']:.1f} | "
+                     f"{s['dofs']:,} | {s['seconds']:.1f} |")
+    lines += ["", "| distance from the hole [mm] | von Mises dynamic [MPa] | at tip depth [mm] | max principal stress "
+              "[MPa] | min principal stress [MPa] | max principal strain [µε] | min principal strain [µε] | "
+              "von Mises static [MPa] | ratio |", "|---|---|---|---|---|---|---|---|---|"]
+    for row in hole["distance"]:
+        d = row["dynamic"]
+        lines.append(f"| {row['radius_mm']:g} | {_fmt(d['von_mises_MPa'])} | {d['tip_depth_mm']:.2f} | "
+                     f"{_fmt(d['max_principal_stress_MPa'])} | {_fmt(d['min_principal_stress_MPa'])} | "
+                     f"{1e6 * d['max_principal_strain']:.0f} | {1e6 * d['min_principal_strain']:.0f} | "
+                     f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} |")
+    lines += ["", f"Exclusion-radius sensitivity (maximum von Mises farther than the radius from the hole surface, "
+                  f"excluding {options['cut_margin_mm']:g} mm at the local model's cut boundary and the clamp zones; "
+                  f"quoted radius {options['exclusion_radius_mm']:g} mm):", "",
+              "| exclusion radius [mm] | von Mises dynamic [MPa] | at [mm] (x, y, z) | its distance from the hole [mm] "
+              "| von Mises static [MPa] | ratio |", "|---|---|---|---|---|---|"]
+    for row in hole["exclusion"]:
+        d = row["dynamic"]
+        where = ", ".join(f"{d[f'location_{a}_mm']:.1f}" for a in "xyz")
+        lines.append(f"| {row['radius_mm']:g} | {_fmt(d['von_mises_MPa'])} | ({where}) | {d['location_distance_mm']:.2f} | "
+                     f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} |")
+    margins = hole["margins"]
+    static = {(r["kind"], r["radius_mm"]): r for r in margins["static"]}
+    lines += ["", f"**Margin to failure** near the hole: the smallest load factor to failure over the stations "
+                  f"({margins['criterion']}; {margins['source']}). The stress under the load itself is not used.", "",
+              "| where | strength ratio, dynamic | at tip depth [mm] | strength ratio, static |", "|---|---|---|---|"]
+    for r in margins["dynamic"]:
+        where = (f"{r['radius_mm']:g} mm from the hole" if r["kind"] == "distance"
+                 else f"beyond {r['radius_mm']:g} mm of the hole")
+        s = static.get((r["kind"], r["radius_mm"]))
+        lines.append(f"| {where} | {_fmt(r['strength_ratio'], 3)} | {r['tip_depth_mm']:.2f} | "
+                     f"{_fmt(s['strength_ratio'] if s else None, 3)} |")
+    return lines
+
+
+def hole_headline_cell(summary: dict) -> str:
+    """The study table's cell: the dynamic von Mises stress [MPa] at the headline distance from
+    the hole wall, with that distance; "–" without a hole result."""
+    hole = summary.get("hole")
+    if not hole:
+        return "–"
+    return f"{_fmt(hole['headline']['dynamic']['von_mises_MPa'])} ({hole['headline']['distance_mm']:g} mm)"
