@@ -194,7 +194,8 @@ class LoadsSpec(_Section):
     headline) and the maximum outside exclusion radii (docs/hole.md). ``"surface_patch"``:
     the loads on a disk of the outer surface only, for comparison with the thesis's point-like
     loading (its peak stress under the patch is mesh-dependent). ``refinement``,
-    ``submodel_radius_mm`` and ``depth_cap_mm`` set the local model's mesh and extent."""
+    ``submodel_radius_mm`` and ``depth_cap_mm`` set the local model's mesh and extent,
+    ``smoothing_mm`` the Gaussian smoothing of the bone surfaces it sees (0: none)."""
 
     application: Literal["hole", "surface_patch"] = "hole"
     stations: int = Field(3, ge=1, le=20)
@@ -205,6 +206,7 @@ class LoadsSpec(_Section):
     refinement: float = Field(1.0, gt=0, le=4)
     submodel_radius_mm: float = Field(8.0, gt=2, le=50)
     depth_cap_mm: PositiveMM = 12.0
+    smoothing_mm: float = Field(1.0, ge=0, le=5)
 
     @model_validator(mode="after")
     def _quoted_values_are_measured(self):
@@ -222,7 +224,7 @@ class LoadsSpec(_Section):
                            exclusion_radii_mm=tuple(self.exclusion_radii_mm),
                            exclusion_radius_mm=self.exclusion_radius_mm, headline_distance_mm=self.headline_distance_mm,
                            refinement=self.refinement, submodel_radius_mm=self.submodel_radius_mm,
-                           depth_cap_mm=self.depth_cap_mm)
+                           depth_cap_mm=self.depth_cap_mm, smoothing_mm=self.smoothing_mm)
 
 
 class TimeSpec(_Section):

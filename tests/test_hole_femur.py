@@ -92,3 +92,24 @@ def test_columns_off_the_bone_are_user_errors():
         columns.top(np.array([[0.0, 0.0], [0.0, 20.0]]))
     with pytest.raises(UserError, match="depth cap"):
         femur_columns(mesh, outer, frame(), depth_cap_mm=0.0)
+
+
+def test_smoothed_columns_are_the_gaussian_blur_of_the_tube():
+    """A Gaussian of standard deviation σ blurs a depth profile f(x) to f + σ² f''/2 (+ O(σ⁴));
+    the tube's top f = R − √(R² − x²) and canal f = R − √(r² − x²) are smooth, so the smoothed
+    columns must follow that to within the faceting and the next-order term."""
+    from femstudy.hole.femur import smooth_columns
+
+    mesh, outer = tube()
+    sigma = 0.6
+    smooth = smooth_columns(femur_columns(mesh, outer, frame(), depth_cap_mm=20.0), 5.0, sigma)
+    rng = np.random.default_rng(5)
+    xy = rng.uniform(-3.0, 3.0, (30, 2))
+    x = lateral_offset(smooth.raw, xy)
+    top = smooth.top(xy)
+    bottom, free = smooth.bottom(xy)
+    assert free.all()
+    for depth, radius in ((top, R_OUT), (bottom, R_IN)):
+        curvature = radius ** 2 / (radius ** 2 - x ** 2) ** 1.5
+        expected = R_OUT - np.sqrt(radius ** 2 - x ** 2) + sigma ** 2 / 2 * curvature
+        np.testing.assert_allclose(depth, expected, atol=0.005 + 0.1 * sigma ** 2 / 2 * curvature.max())

@@ -72,4 +72,7 @@ def test_measures_of_a_uniform_strain():
         assert abs(m.max_principal_strain - principal_strain[-1]) < 1e-9 * np.abs(principal_strain).max()
         assert abs(m.min_principal_strain - principal_strain[0]) < 1e-9 * np.abs(principal_strain).max()
         assert m.location_distance_mm >= m.radius_mm - 1e-9
-    assert measures[2].points > measures[3].points  # fewer points outside the larger radius
+    kinds = [m.kind for m in measures]
+    assert kinds == ["distance", "wall", "distance", "wall", "exclusion", "exclusion"]
+    assert measures[0].points > measures[1].points  # the wall's points are a part of the set
+    assert measures[4].points > measures[5].points  # fewer points outside the larger radius

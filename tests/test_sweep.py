@@ -13,6 +13,8 @@ name = "sweeptest"
 [mesh]
 size_mm = 16.0
 order = 1
+[loads]
+stations = 1
 [time]
 end_s = 3.0
 step_s = 1.0
@@ -58,6 +60,11 @@ def test_mesh_sweep_writes_table_and_convergence_assessment(case_file, mesh_cach
     # the peak stress under the patch is singular: never converged; it uses the site size as h
     assert quantities["max_von_mises_MPa"]["verdict"] == "singular"
     assert quantities["max_von_mises_MPa"]["h"][0] == pytest.approx(float(rows[2]["site_size_mm"]))
+    # the hole model refines with the ladder; its quantities use its own wall element size as h
+    assert [float(r["hole_h_mm"]) for r in rows[:3]] == pytest.approx([0.6, 0.45, 0.3])
+    hole = quantities["hole_von_mises_1mm_MPa"]
+    assert hole["h"] == pytest.approx([0.3, 0.45, 0.6])
+    assert hole["verdict"] != "singular" and all(v > 0 for v in hole["values"])
     text = (out / "sweep.md").read_text()
     assert "GCI" in text and "![" in text
     from PIL import Image

@@ -128,3 +128,85 @@ def femur_columns(mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, dept
     require(len(outer_faces) > 0, "the outer surface has no triangles")
     return FemurColumns(mesh, frame, outer_faces, boundary_faces(mesh), float(depth_cap_mm),
                         float(region_tolerance_mm))
+
+
+@dataclass(frozen=True)
+class SmoothColumns:
+    """Column tops and bottoms of a :class:`FemurColumns` smoothed at a stated length.
+
+    The global mesh's surfaces are decimated polyhedra (facets of several mm whose edges are
+    kinks of tens of degrees); ray-cast column by column they give the local model corners
+    that move with its refinement. Here the top and bottom depths are ray-cast once on a fixed
+    grid (``spacing_mm``) over the disk, convolved with a Gaussian of standard deviation
+    ``smoothing_mm`` and interpolated by bicubic splines, so every refinement of the local
+    model sees one smooth surface. The bottom's exit depth is clipped 1 mm below the cap before
+    smoothing; a column is free where the smoothed exit lies above the cap. Regions are the
+    global mesh's (unsmoothed).
+    """
+
+    raw: FemurColumns
+    top_spline: object
+    exit_spline: object
+
+    @property
+    def frame(self) -> HoleFrame:
+        return self.raw.frame
+
+    def top(self, xy: np.ndarray) -> np.ndarray:
+        xy = np.asarray(xy, float)
+        return self.top_spline(xy[:, 0], xy[:, 1], grid=False)
+
+    def bottom(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        xy = np.asarray(xy, float)
+        top = self.top(xy)
+        exit_depth = top + self.exit_spline(xy[:, 0], xy[:, 1], grid=False)
+        free = exit_depth <= top + self.raw.depth_cap_mm
+        return np.where(free, exit_depth, top + self.raw.depth_cap_mm), free
+
+    def region(self, points: np.ndarray) -> np.ndarray:
+        return self.raw.region(points)
+
+
+def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float = 1.0,
+                   spacing_mm: float = 0.2) -> SmoothColumns:
+    """Smoothed top and bottom callables over the disk of ``radius_mm`` (:class:`SmoothColumns`).
+
+    Parameters
+    ----------
+    columns : the ray-cast columns (:func:`femur_columns`)
+    radius_mm : the local model's radius R_sub [mm]
+    smoothing_mm : standard deviation of the Gaussian [mm]
+    spacing_mm : ray grid spacing [mm]
+
+    Returns
+    -------
+    SmoothColumns
+
+    Example
+    -------
+    >>> smooth = smooth_columns(femur_columns(mesh, outer, frame, 12.0), 8.0)  # doctest: +SKIP
+    >>> hole = hole_mesh(frame, 2.7, 90.0, 8.0, tips, smooth.top, smooth.bottom, smooth.region)  # doctest: +SKIP
+    """
+    from scipy.interpolate import RectBivariateSpline
+    from scipy.ndimage import gaussian_filter
+
+    require(smoothing_mm > 0 and spacing_mm > 0, "the smoothing length and ray spacing must be positive")
+    reach = radius_mm + 4 * smoothing_mm + spacing_mm
+    axis = np.arange(-reach, reach + spacing_mm / 2, spacing_mm)
+    X, Y = np.meshgrid(axis, axis, indexing="ij")
+    xy = np.column_stack([X.ravel(), Y.ravel()])
+    inside = np.hypot(xy[:, 0], xy[:, 1]) <= reach
+    top = np.full(len(xy), np.nan)
+    exit_below = np.full(len(xy), np.nan)
+    top[inside] = columns.top(xy[inside])
+    bottom, free = columns.bottom(xy[inside])
+    exit_below[inside] = np.where(free, bottom - top[inside], columns.depth_cap_mm + 1.0)
+    sigma = smoothing_mm / spacing_mm
+
+    def smoothed(values: np.ndarray) -> RectBivariateSpline:
+        grid = values.reshape(X.shape)
+        weight = gaussian_filter(np.isfinite(grid).astype(float), sigma, mode="constant")
+        field = gaussian_filter(np.nan_to_num(grid), sigma, mode="constant") / np.maximum(weight, 1e-12)
+        return RectBivariateSpline(axis, axis, field, kx=3, ky=3)
+
+    return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)))

@@ -2,7 +2,9 @@
 exclusion zone around it.
 
 * **At distance δ** (:func:`distance_measures`): over the points at δ from the hole surface
-  (:func:`femstudy.hole.samples.offset_samples`, every azimuth and depth), the largest von
+  (:func:`femstudy.hole.samples.offset_samples`, every azimuth and depth; kind "distance"), and
+  over those of them beside the cylindrical wall (r = R + δ down to the corner depth; kind
+  "wall"), the largest von
   Mises stress and where it is, the largest and smallest principal stresses and strains, and
   the smallest strength ratio (:mod:`femstudy.failure`: Tsai–Wu for cortical bone about the
   long axis, von Mises against the mean strength for cancellous bone). Points outside the
@@ -27,8 +29,10 @@ from femstudy.fe.post import quadrature_points, stress_projection, von_mises
 from femstudy.femur_model import CORTICAL
 from femstudy.hole.samples import hole_distance, offset_samples
 
-#: Measure kinds: at a distance from the hole wall, or the maximum outside an exclusion radius.
-KINDS = ("distance", "exclusion")
+#: Measure kinds: at a distance from the hole surface (wall, corner, cone and tip), at a
+#: distance from its cylindrical wall only (r = R + δ over the engaged depth), or the maximum
+#: outside an exclusion radius.
+KINDS = ("distance", "wall", "exclusion")
 
 
 @dataclass(frozen=True)
@@ -36,7 +40,8 @@ class HoleMeasure:
     """Stress measures of one loading over one point set of one station.
 
     loading : "dynamic" or "static"; station : station number; tip_depth_mm : its drill-tip depth
-    kind : "distance" (points at ``radius_mm`` from the hole) or "exclusion" (farther than it)
+    kind : "distance" (points at ``radius_mm`` from the hole surface), "wall" (those of them
+           beside the cylindrical wall) or "exclusion" (farther than it)
     von_mises_MPa, location_mm : the largest von Mises stress and its point (global frame)
     location_distance_mm : that point's distance from the hole surface
     max_principal_stress_MPa, min_principal_stress_MPa : extreme principal stresses
@@ -129,15 +134,16 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     u = np.asarray(u, float).reshape(system.n_dofs, -1)
     out = []
     for delta in distances_mm:
-        probe = point_probe(system, offset_samples(station, delta).points)
-        keep = probe.inside
-        e = probe.element[keep]
-        stress = probe.stress(u)[keep]  # (n, k, 6)
-        D = system.materials.D[system.materials.index[e]]
-        context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": "distance",
-                   "radius_mm": float(delta)}
-        out += _measures(stress, D, system.region[e], probe.points[keep], np.full(len(e), float(delta)), long_axis,
-                         context, loadings)
+        samples = offset_samples(station, delta)
+        probe = point_probe(system, samples.points)
+        stress_all = probe.stress(u)  # (n, k, 6)
+        for kind, chosen in (("distance", probe.inside), ("wall", probe.inside & samples.of("wall"))):
+            e = probe.element[chosen]
+            D = system.materials.D[system.materials.index[e]]
+            context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": kind,
+                       "radius_mm": float(delta)}
+            out += _measures(stress_all[chosen], D, system.region[e], probe.points[chosen], np.full(len(e), float(delta)),
+                             long_axis, context, loadings)
     return out
 
 

@@ -25,7 +25,7 @@ from femstudy.drilling import allotta, evaluate
 from femstudy.errors import require
 from femstudy.hole.coupling import cut_boundary
 from femstudy.hole.dirichlet import factorize_prescribed
-from femstudy.hole.femur import femur_columns
+from femstudy.hole.femur import femur_columns, smooth_columns
 from femstudy.hole.frame import HoleFrame
 from femstudy.hole.loads import hole_loads
 from femstudy.hole.measures import HoleMeasure, distance_measures, exclusion_measures
@@ -50,6 +50,11 @@ class HoleOptions:
     refinement : :class:`femstudy.hole.mesh.Resolution` refinement (1: 0.3 mm at the wall)
     submodel_radius_mm, depth_cap_mm : extent of the local model (radius about the axis, depth below the top)
     cut_margin_mm : quadrature points this close to a cut-face node are not in the exclusion measures
+    smoothing_mm : Gaussian smoothing length of the bone's top and bottom surfaces seen by the
+        local model (:func:`femstudy.hole.femur.smooth_columns`); 0 ray-casts every column on the
+        global facets
+    rotation_deg : turns the local mesh about the drill axis (its placement; for measuring the
+        discretisation noise of a maximum, as two meshes of one size placed differently)
     """
 
     stations: int = 3
@@ -62,6 +67,8 @@ class HoleOptions:
     submodel_radius_mm: float = 8.0
     depth_cap_mm: float = 12.0
     cut_margin_mm: float = 2.0
+    smoothing_mm: float = 1.0
+    rotation_deg: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -122,8 +129,9 @@ class HoleResult:
         return self.worst("distance", self.options.headline_distance_mm, loading)
 
     def table(self, kind: str) -> list[dict]:
-        """Per radius: the worst station's measures of both loadings and their ratio (a report row)."""
-        radii = self.options.distances_mm if kind == "distance" else self.options.exclusion_radii_mm
+        """Per radius (kind "distance", "wall" or "exclusion"): the worst station's measures of both
+        loadings and their ratio (a report row)."""
+        radii = self.options.exclusion_radii_mm if kind == "exclusion" else self.options.distances_mm
         rows = []
         for r in radii:
             d, s = self.worst(kind, r, "dynamic"), self.worst(kind, r, "static")
@@ -162,7 +170,8 @@ class HoleResult:
         return jsonable({"options": dict(self.options.__dict__), "stations": [dict(s.__dict__) for s in self.stations],
                          "static_load": {"thrust_N": self.static_load[0], "torque_Nmm": self.static_load[1]},
                          "mesh_s": self.mesh_seconds, "wall_element_mm": self.wall_element_mm,
-                         "distance": self.table("distance"), "exclusion": self.table("exclusion"),
+                         "distance": self.table("distance"), "wall": self.table("wall"),
+                         "exclusion": self.table("exclusion"),
                          "margins": self.margins(),
                          "headline": {"distance_mm": self.options.headline_distance_mm,
                                       "dynamic": self.headline("dynamic").row(),
@@ -225,7 +234,12 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
     tips = station_tips(options, loading.depth_mm, model.site.cortical_thickness_mm)
     start = time.perf_counter()
     frame = HoleFrame.along(model.site.entry_point, model.site.direction)
+    if options.rotation_deg:
+        c, s = np.cos(np.radians(options.rotation_deg)), np.sin(np.radians(options.rotation_deg))
+        frame = HoleFrame(frame.origin, frame.axis, c * frame.e1 + s * frame.e2, c * frame.e2 - s * frame.e1)
     columns = femur_columns(model.mesh, outer_faces(model.mesh, model.frame), frame, options.depth_cap_mm)
+    if options.smoothing_mm > 0:
+        columns = smooth_columns(columns, options.submodel_radius_mm, options.smoothing_mm)
     hole = hole_mesh(frame, case.drill.diameter_mm, case.drill.point_angle_deg, options.submodel_radius_mm, tips,
                      columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement))
     mesh_seconds = time.perf_counter() - start

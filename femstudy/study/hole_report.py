@@ -32,7 +32,8 @@ def hole_section(hole: dict) -> list[str]:
              f"hole at {len(hole['stations'])} depth stations (radius {options['submodel_radius_mm']:g} mm, "
              f"refinement {options['refinement']:g}); cutting thrust and torque on the drill-point cone, chip "
              "evacuation torque as wall friction and its thrust on the bottom. Maxima over the stations and over "
-             "every point at the stated distance from the hole surface (wall and cone).", "",
+             "every point at the stated distance from the hole surface (wall and cone; the last column: the points "
+             "beside the cylindrical wall only).", "",
              "| station | tip depth [mm] | time [s] | cutting thrust [N] | cutting torque [N·mm] | evacuation thrust [N] "
              "| evacuation torque [N·mm] | DOFs | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
     for s in hole["stations"]:
@@ -41,13 +42,17 @@ def hole_section(hole: dict) -> list[str]:
                      f"{s['dofs']:,} | {s['seconds']:.1f} |")
     lines += ["", "| distance from the hole [mm] | von Mises dynamic [MPa] | at tip depth [mm] | max principal stress "
               "[MPa] | min principal stress [MPa] | max principal strain [µε] | min principal strain [µε] | "
-              "von Mises static [MPa] | ratio |", "|---|---|---|---|---|---|---|---|---|"]
+              "von Mises static [MPa] | ratio | beside the wall: von Mises dynamic [MPa] |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    wall = {r["radius_mm"]: r for r in hole.get("wall", [])}
     for row in hole["distance"]:
         d = row["dynamic"]
+        beside = wall.get(row["radius_mm"], {}).get("dynamic", {}).get("von_mises_MPa")
         lines.append(f"| {row['radius_mm']:g} | {_fmt(d['von_mises_MPa'])} | {d['tip_depth_mm']:.2f} | "
                      f"{_fmt(d['max_principal_stress_MPa'])} | {_fmt(d['min_principal_stress_MPa'])} | "
                      f"{1e6 * d['max_principal_strain']:.0f} | {1e6 * d['min_principal_strain']:.0f} | "
-                     f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} |")
+                     f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} | "
+                     f"{_fmt(beside)} |")
     lines += ["", f"Exclusion-radius sensitivity (maximum von Mises farther than the radius from the hole surface, "
                   f"excluding {options['cut_margin_mm']:g} mm at the local model's cut boundary and the clamp zones; "
                   f"quoted radius {options['exclusion_radius_mm']:g} mm):", "",
