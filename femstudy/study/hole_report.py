@@ -33,7 +33,8 @@ def hole_section(hole: dict) -> list[str]:
              f"refinement {options['refinement']:g}); cutting thrust and torque on the drill-point cone, chip "
              "evacuation torque as wall friction and its thrust on the bottom. Maxima over the stations and over "
              "every point at the stated distance from the hole surface (wall and cone; the last column: the points "
-             "beside the cylindrical wall only).", "",
+             "beside the cylindrical wall only). Their convergence under refinement of the hole model is measured "
+             "by `bench/hole_convergence.py` and `femstudy sweep` (docs/hole.md).", "",
              "| station | tip depth [mm] | time [s] | cutting thrust [N] | cutting torque [N·mm] | evacuation thrust [N] "
              "| evacuation torque [N·mm] | DOFs | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
     for s in hole["stations"]:
