@@ -29,7 +29,7 @@ def hole_section(hole: dict) -> list[str]:
     sensitivity and the failure margins, as Markdown lines."""
     options = hole["options"]
     lines = ["**Stresses near the drilled hole** (docs/hole.md): the global model drives local models of the "
-             f"hole at {len(hole['stations'])} depth stations (radius {options['submodel_radius_mm']:g} mm, "
+             f"hole at {len(hole['stations'])} depth station{'s' if len(hole['stations']) != 1 else ''} (radius {options['submodel_radius_mm']:g} mm, "
              f"refinement {options['refinement']:g}); cutting thrust and torque on the drill-point cone, chip "
              "evacuation torque as wall friction and its thrust on the bottom. Maxima over the stations and over "
              "every point at the stated distance from the hole surface (wall and cone; the last column: the points "
