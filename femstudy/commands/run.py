@@ -32,10 +32,15 @@ def run(args: argparse.Namespace) -> int:
                                bone=args.bone, force=args.force)
     for r in results:
         d, st = r.dynamic.peaks, r.static.peaks
+        if r.hole is not None:
+            distance = r.hole.options.headline_distance_mm
+            stress = (f"von Mises {distance:g} mm from the hole {r.hole.headline('dynamic').von_mises_MPa:.4g} / "
+                      f"{r.hole.headline('static').von_mises_MPa:.4g} MPa")
+        else:
+            stress = (f"max von Mises under the patch {d['max_von_mises_MPa'].value:.4g} / "
+                      f"{st['max_von_mises_MPa'].value:.4g} MPa")
         print(f"{r.case.name}: max deflection {d['max_deflection_mm'].value:.4g} mm dynamic / "
-              f"{st['max_deflection_mm'].value:.4g} mm static; max von Mises {d['max_von_mises_MPa'].value:.4g} / "
-              f"{st['max_von_mises_MPa'].value:.4g} MPa ({d['max_von_mises_excl_MPa'].value:.4g} MPa outside the "
-              f"exclusion zone) -> {r.out_dir}")
+              f"{st['max_deflection_mm'].value:.4g} mm static; {stress} -> {r.out_dir}")
     if table is not None:
         print(f"combined table: {table}")
     return 0
