@@ -19,15 +19,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recording", type=Path, metavar="RECORDING.csv", help="the recording (femstudy format)")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--simulation", type=Path, metavar="SIM.csv",
-                      help="a simulated trace in the recording format, on the recording's clock "
-                           "(any sampling rate and span)")
+                      help="a simulated trace in the recording format (any sampling rate, span and "
+                           "clock: it is placed on the recording's by correlation)")
     what.add_argument("--model", choices=("allotta", "clogging"),
                       help="a femstudy load model for the recording's feed, speed and drill, started "
                            "at its detected contact")
     p.add_argument("--bone", default="bovine",
                    help="bone set for --model and for the friction reading of chip clogging (bovine)")
     p.add_argument("--cortex-mm", type=float,
-                   help="cortical thickness [mm] (default: header cortex_mm, else from the breakthrough)")
+                   help="cortical thickness [mm] (default: header cortex_mm, else the simulation's "
+                        "breakthrough, else the depth reached, with a note)")
     add_metadata_options(p, "the recording")
     p.add_argument("--json", type=Path, metavar="OUT.json", help="write the diagnosis as JSON")
     p.add_argument("--report", type=Path, metavar="DIR",
@@ -39,7 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from femstudy.console import Console
-    from femstudy.diagnosis import inputs, report
+    from femstudy.diagnosis import report
     from femstudy.diagnosis.diagnose import diagnose
     from femstudy.drilling.friction import load_bone_set
     from femstudy.recordings import read_recording
@@ -51,17 +52,9 @@ def run(args: argparse.Namespace) -> int:
     rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override)
     for note in rec.notes:
         console.progress(note)
-    bone = load_bone_set(args.bone)
-    if args.simulation:
-        sim = inputs.read_simulation(args.simulation, rec)
-        cortex = inputs.cortex_thickness(rec, args.cortex_mm)
-        label = f"{args.simulation.name}"
-    else:
-        sim, cortex = inputs.model_simulation(rec, args.model, bone, args.cortex_mm)
-        label = f"load model '{args.model}' (bone set '{bone.name}'), contact at {sim.contact_s:.3f} s"
-    console.progress(f"read {rec.name} ({rec.time_s.size} samples) and the simulation ({label})")
-    d = diagnose(rec, sim, cortex, bone, progress=console.progress)
-    summary = report.summary_text(d, label)
+    d = diagnose(rec, args.simulation, args.cortex_mm, load_bone_set(args.bone), progress=console.progress,
+                 model=args.model)
+    summary = report.summary_text(d)
     print(summary)
     if args.json:
         report.write_json(args.json, d)
