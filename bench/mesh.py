@@ -26,10 +26,8 @@ def case_text(surface: str) -> str:
 
 def main() -> int:
     sys.path.insert(0, str(REPO))
-    import os
-
     from femstudy.casefile import parse_case
-    from femstudy.meshing import build_femur_model
+    from femstudy.study.femur import femur_model
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=float, nargs="+", default=[12.0, 8.0, 5.0])
@@ -47,15 +45,14 @@ def main() -> int:
             f"{'site_edge_mm':>12} {'disk_facets':>11} {'cortex_mm':>9} {'vol_err_%':>9}")
     rows = []
     with tempfile.TemporaryDirectory(prefix="femstudy-bench-cache-") as cache:
-        os.environ["FEMSTUDY_CACHE"] = cache
         for name, surface in femurs:
             case = parse_case(case_text(surface))
             for size in args.sizes:
                 start = time.perf_counter()
-                cold = build_femur_model(case, mesh_size_mm=size)
+                cold = femur_model(case, Path(cache), size)
                 build_s = time.perf_counter() - start
                 start = time.perf_counter()
-                warm = build_femur_model(case, mesh_size_mm=size)
+                warm = femur_model(case, Path(cache), size)
                 cached_s = time.perf_counter() - start
                 assert warm.stats["cache_hit"] and not cold.stats["cache_hit"]
                 s, q = cold.stats, cold.quality
@@ -69,7 +66,7 @@ def main() -> int:
     print("\ncolumns: tets/nodes of the final mesh; tetwild_s = fTetWild wall time; build_s = whole cold build "
           "(fields, TetWild, classification, site refinement, landmarks); cached_s = the same call served from "
           "the cache; rr = radius ratio 3 r_in/R_circ (p1, p50 percentiles), poor = tets with rr < 0.1; "
-          "site_edge_mm = median edge of the outer facets in the r = 1.35 mm load disk (disk_facets of them); "
+          "site_edge_mm = median edge of the outer facets in the drill-radius load disk (disk_facets of them); "
           "cortex_mm = cortex along the drill axis (6 requested); vol_err = tet volume vs surface - canal")
     return 0
 

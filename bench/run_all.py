@@ -36,6 +36,8 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
+#: The mesh cache this benchmark meshes into (the command line's default or $FEMSTUDY_CACHE).
+CACHE_DIR = Path(os.environ.get("FEMSTUDY_CACHE") or REPO / ".femstudy-cache")
 sys.path.insert(0, str(REPO))
 
 from bench.peers import femstudy_side, standin  # noqa: E402
@@ -85,9 +87,8 @@ def runs(fe: str, with_ccx_dynamic: bool) -> list[Run]:
 def build_model(geometry: str, case: Case, size_mm: float) -> femstudy_side.Model:
     """femstudy's inputs at one mesh size: mesh, clamps, site, materials and both loadings."""
     if geometry == "femur":
-        from femstudy.meshing import build_femur_model
-        sized = case.model_copy(update={"mesh": case.mesh.model_copy(update={"size_mm": size_mm})})
-        femur = build_femur_model(sized)
+        from femstudy.study.femur import femur_model
+        femur = femur_model(case, CACHE_DIR, size_mm)
         mesh, clamps, site = femur.mesh, femur.clamps, femur.site
         radius = case.drill.diameter_mm / 2
     else:
@@ -273,6 +274,7 @@ def report(rows: list[dict], args, command: str, started: str, load_before, load
             seen.add(run.key)
             env = " ".join(f"{k}={v}" for k, v in run.env.items())
             argv = [os.path.relpath(a, REPO) if a.startswith(str(REPO)) else a for a in run.argv]
+            argv = ["python" if a == sys.executable else a for a in argv]  # no machine paths in the report
             lines.append(f"- {run.label}, {run.analysis}: `{(env + ' ') if env else ''}{shlex.join(argv)}`")
     return "\n".join(lines) + "\n"
 

@@ -9,14 +9,16 @@ from __future__ import annotations
 
 import difflib
 import re
-import tomllib
 from pathlib import Path
 from typing import Annotated, Literal, Union
 
 from pydantic import (BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator,
                       model_validator)
 
+from femstudy import thesis
 from femstudy.errors import UserError
+from femstudy.materials import BoneMaterials, IsotropicMaterial
+from femstudy.schema import describe, key_line, parse_toml
 
 PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
@@ -65,9 +67,12 @@ class CanalSpec(_Section):
 
 
 class GeometrySpec(_Section):
-    """The bone surface and how to read it."""
+    """The bone surface and how to read it. ``bodies``: a file holding several separate
+    bodies (a femur exported with its patella, loose fragments) is refused with their sizes
+    (``"one"``) or meshed by its largest body (``"largest"``)."""
 
     surface: str = "builtin"
+    bodies: Literal["one", "largest"] = "one"
     units: Literal["auto", "mm", "cm", "m", "in"] = "auto"
     long_axis: Union[Literal["auto"], Vector3] = "auto"
     anterior: Union[Literal["auto"], Vector3] = "auto"
@@ -105,9 +110,14 @@ class MaterialSpec(_Section):
         """ρ [tonne/mm³] = ρ [kg/m³] · 1e-12."""
         return self.density_kg_m3 * 1e-12
 
+    def to_fe(self) -> IsotropicMaterial:
+        """The solver's record, in MPa and tonne/mm³."""
+        return IsotropicMaterial(self.youngs_modulus_MPa, self.poissons_ratio, self.density_t_mm3)
 
-TABLE_3_1 = {"cortical": MaterialSpec(youngs_modulus_GPa=16.0, poissons_ratio=0.4, density_kg_m3=1700),
-             "cancellous": MaterialSpec(youngs_modulus_GPa=0.5, poissons_ratio=0.15, density_kg_m3=320)}
+
+TABLE_3_1 = {name: MaterialSpec(youngs_modulus_GPa=m["E_MPa"] / 1e3, poissons_ratio=m["nu"],
+                                density_kg_m3=round(m["density_t_mm3"] * 1e12, 6))
+             for name, m in thesis.TABLE_3_1.items()}
 
 
 class MaterialsSpec(_Section):
@@ -127,6 +137,10 @@ class MaterialsSpec(_Section):
                     data[name] = {**default.model_dump(), **data[name]}
         return data
 
+    def to_fe(self) -> BoneMaterials:
+        """The solver's material records."""
+        return BoneMaterials(self.cortical.to_fe(), self.cancellous.to_fe(), self.cortical_model)
+
 
 class ClampSpec(_Section):
     """Surface nodes within ``length_mm`` of each end, along the long axis, are fixed."""
@@ -145,24 +159,31 @@ class SiteSpec(_Section):
 
 
 class DrillSpec(_Section):
-    diameter_mm: float = Field(2.7, gt=0, le=20)
-    point_angle_deg: float = Field(90.0, gt=0, lt=180)
+    diameter_mm: float = Field(thesis.DRILL_DIAMETER_MM, gt=0, le=20)
+    point_angle_deg: float = Field(thesis.DRILL_POINT_ANGLE_DEG, gt=0, lt=180)
     wall_mm: float | None = Field(None, gt=0, le=20)
 
 
 class DrillingSpec(_Section):
     """Operating point and load models. ``depth_mm = "cortex"`` drills the local cortex.
-    ``mu_f``/``mu_w`` replace the bone set's power law (e.g. to sweep friction);
+    ``bone`` names the friction calibration: "human" (thesis Table 5-11; the default, femurs
+    here being human), "bovine" (Table 5-1), "human-printed" (the thesis's printed Eqs
+    5.8/5.9) or a calibrated set. ``mu_f``/``mu_w`` replace its power law (e.g. to sweep friction);
     ``load_scale`` multiplies the thrust and torque of both loadings (sensitivity studies,
-    safety factors; 0 gives the unloaded bone)."""
+    safety factors; 0 gives the unloaded bone). ``flute_oscillation`` is the relative
+    amplitude of the per-flute oscillation and ``breakthrough_release_s`` the time over which
+    the chip-evacuation load is released at breakthrough ("flute": one flute passage); both
+    enter the resolved transient only (docs/load-models.md)."""
 
     feed_mm_s: float = Field(2.0, gt=0, le=50)
     spindle_rpm: float = Field(1500.0, gt=0, le=100_000)
-    bone: str = "bovine"
+    bone: str = "human"
     mu_f: float | None = Field(None, gt=0, le=5)
     mu_w: float | None = Field(None, gt=0, le=10)
     depth_mm: Union[Literal["cortex"], Annotated[float, Field(gt=0, le=100)]] = 6.0
     load_scale: float = Field(1.0, ge=0, le=100)
+    flute_oscillation: float = Field(0.1, ge=0, lt=1)
+    breakthrough_release_s: Union[Literal["flute"], Annotated[float, Field(gt=0, le=10)]] = "flute"
 
 
 class TimeSpec(_Section):
@@ -177,11 +198,19 @@ class TimeSpec(_Section):
 
 
 class AnalysisSpec(_Section):
+    """``resolved`` adds a transient whose step resolves the lowest mode
+    (``steps_per_period`` steps per period), with the per-flute oscillation and breakthrough
+    release, from ``resolved_lead_s`` before breakthrough (started from the quasi-static state
+    there) to 0.1 s past the release: the dynamic amplification near the peak loads."""
+
     transient: bool = True
     rayleigh_alpha_per_s: float = Field(0.0, ge=0)
     rayleigh_beta_s: float = Field(0.0, ge=0)
     modes: int = Field(6, ge=0, le=100)
     exclusion_radius_mm: PositiveMM = 4.0
+    resolved: bool = True
+    steps_per_period: int = Field(20, ge=10, le=200)
+    resolved_lead_s: float = Field(0.5, gt=0, le=3600)
 
 
 class OutputSpec(_Section):
@@ -234,79 +263,27 @@ class Case(_Section):
         return path
 
 
-def _key_line(text: str, keys: list[str]) -> int | None:
-    """Best-effort 1-based line of the TOML key path ``keys``, else of its nearest table."""
-    table: list[str] = []
-    best, best_depth = None, 0
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = raw.split("#", 1)[0].strip()
-        header = re.fullmatch(r"\[\[?\s*([^\]]+?)\s*\]\]?", line)
-        if header:
-            table = [part.strip().strip('"') for part in header.group(1).split(".")]
-            if table == keys[: len(table)] and len(table) > best_depth:
-                best, best_depth = number, len(table)
-            continue
-        match = re.match(r"([A-Za-z0-9_.\"-]+)\s*=", line)
-        if match:
-            path = table + [part.strip().strip('"') for part in match.group(1).split(".")]
-            if path == keys[: len(path)] and len(path) > best_depth:
-                best, best_depth = number, len(path)
-    return best
-
-
-def _field_path(loc: tuple, model: type[BaseModel]) -> tuple[list[str], type[BaseModel] | None]:
-    """The TOML key path of an error location, without pydantic's union-member tags,
-    and the model owning the last key."""
-    keys: list[str] = []
-    owner: type[BaseModel] | None = model
-    for item in loc:
-        if owner is not None and isinstance(item, str) and item in owner.model_fields:
-            keys.append(item)
-            annotation = owner.model_fields[item].annotation
-            owner = annotation if isinstance(annotation, type) and issubclass(annotation, BaseModel) else None
-        elif isinstance(item, int) and owner is not None:
-            keys.append(str(item))
-        elif owner is not None and isinstance(item, str):  # an unknown key
-            keys.append(item)
-            return keys, owner
-    return keys, None
-
-
-def _describe(errors: list[dict]) -> tuple[list[str], str]:
-    """The key path and a one-line message for the first problem (union members merged)."""
-    keys, owner = _field_path(errors[0]["loc"], Case)
-    same = [e for e in errors if _field_path(e["loc"], Case)[0] == keys]
-    dotted = ".".join(keys) or "(file)"
-    if errors[0]["type"] == "extra_forbidden":
-        valid = [v for v in (owner.model_fields if owner else []) if v != "source"]
-        near = difflib.get_close_matches(keys[-1], valid, n=1)
-        hint = f"did you mean '{near[0]}'?" if near else f"valid keys: {', '.join(valid)}"
-        return keys, f"{dotted}: unknown key; {hint}"
-    messages = list(dict.fromkeys(e["msg"].replace("Value error, ", "") for e in same))
-    expected = ", or ".join([messages[0]] + [m.removeprefix("Input should be ") for m in messages[1:]])
-    got = errors[0].get("input")
-    shown = "" if isinstance(got, dict) or errors[0]["type"] == "missing" else f", got {got!r}"
-    return keys, f"{dotted}: {expected}{shown}"
-
-
 def parse_case(text: str, source: Path | None = None) -> Case:
-    """Validate case-file text; raise :class:`UserError` naming the key and line."""
-    where = str(source) if source else "<case>"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{where}: TOML syntax error: {exc}") from None
-    if "name" not in data and source is not None:
-        data["name"] = source.stem
-    try:
-        case = Case.model_validate(data)
-    except ValidationError as exc:
-        errors = exc.errors()
-        keys, message = _describe(errors)
-        line = _key_line(text, keys)
-        others = {tuple(_field_path(e["loc"], Case)[0]) for e in errors} - {tuple(keys)}
-        more = f" (and {len(others)} more problem{'s' if len(others) > 1 else ''})" if others else ""
-        raise UserError(f"{where}{f':{line}' if line else ''}: {message}{more}") from None
+    """Validate case-file text; raise :class:`UserError` naming the key and line.
+
+    Parameters
+    ----------
+    text : str
+        TOML (every section optional; see :class:`Case`).
+    source : Path, optional
+        The file it came from: relative paths in it are resolved from its folder, and a
+        missing ``name`` is the file's stem.
+
+    Returns
+    -------
+    Case
+    """
+    def defaults(data: dict) -> dict:
+        if "name" not in data and source is not None:
+            data["name"] = source.stem
+        return data
+
+    case = parse_toml(text, Case, str(source) if source else "<case>", defaults)
     return case.model_copy(update={"source": source})
 
 
@@ -328,29 +305,53 @@ def with_overrides(case: Case, overrides: dict) -> Case:
     try:
         updated = Case.model_validate(data)
     except ValidationError as exc:
-        keys, message = _describe(exc.errors())
+        _, message = describe(exc.errors(), Case)
         raise UserError(f"sweep value out of range: {message}") from None
     return updated.model_copy(update={"source": case.source})
 
 
-def check_references(case: Case) -> None:
-    """Fail now, before any work, if the surface file or the bone set does not exist."""
+def check_references(case: Case, bones_dir: Path | None = None) -> None:
+    """Fail now, before any work, if the surface file or the bone set (looked up in
+    ``bones_dir`` besides the built-in ones) does not exist."""
     from femstudy.drilling.friction import load_bone_set
+    from femstudy.meshing.surface import check_surface_file
 
     where = str(case.source) if case.source else "<case>"
     surface = case.surface_path()
-    if surface is not None and not surface.is_file():
-        line = _key_line(case.source.read_text(encoding="utf-8"), ["geometry", "surface"]) if case.source else None
-        raise UserError(f"{where}{f':{line}' if line else ''}: geometry.surface: {surface} does not exist "
-                        f"(paths are relative to the case file's folder; use \"builtin\" for the built-in femur)")
+    if surface is not None:
+        try:
+            check_surface_file(surface)
+        except UserError as exc:
+            line = key_line(case.source.read_text(encoding="utf-8"), ["geometry", "surface"]) if case.source else None
+            hint = (" (paths are relative to the case file's folder; use \"builtin\" for the built-in femur)"
+                    if not surface.exists() else "")
+            raise UserError(f"{where}{f':{line}' if line else ''}: geometry.surface: {exc}{hint}") from None
     try:
-        load_bone_set(case.drilling.bone)
+        load_bone_set(case.drilling.bone, bones_dir)
     except UserError as exc:
         raise UserError(f"{where}: drilling.bone: {exc}") from None
 
 
-def load_case(path: str | Path) -> Case:
-    """Read and validate a case file, including the files and bone set it refers to."""
+def load_case(path: str | Path, bones_dir: Path | None = None) -> Case:
+    """Read and validate a case file, including the files and bone set it refers to.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML case file.
+    bones_dir : Path, optional
+        Folder of calibrated bone sets (default: the user's femstudy data folder).
+
+    Returns
+    -------
+    Case
+
+    Examples
+    --------
+    >>> case = load_case("cases/middiaphysis.toml")   # doctest: +SKIP
+    >>> case.drilling.feed_mm_s                        # doctest: +SKIP
+    2.0
+    """
     path = Path(path)
     if not path.is_file():
         raise UserError(f"case file {path} does not exist")
@@ -359,5 +360,5 @@ def load_case(path: str | Path) -> Case:
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"cannot read case file {path}: {exc}") from None
     case = parse_case(text, path)
-    check_references(case)
+    check_references(case, bones_dir)
     return case

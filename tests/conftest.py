@@ -11,7 +11,17 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
-TLEM2_FEMUR = SHARED / "data" / "femur-tlem2" / "femur_r.stl"
+#: The TLEM 2.0 CT femur (non-commercial licence: never copied into the repository). Tests that
+#: need it look next to the checkout, or where $FEMSTUDY_TLEM2 points, and skip otherwise.
+TLEM2_FEMUR = Path(os.environ.get("FEMSTUDY_TLEM2") or SHARED / "data" / "femur-tlem2" / "femur_r.stl")
+
+
+def pytest_report_header(config):
+    """Say up front whether the real-femur tests will run, and how to make them."""
+    if TLEM2_FEMUR.is_file():
+        return f"TLEM 2.0 femur: {TLEM2_FEMUR} (its tests run)"
+    return (f"TLEM 2.0 femur: not found at {TLEM2_FEMUR}; its tests skip. Put the femur there "
+            "(../shared/data/femur-tlem2/femur_r.stl next to the checkout) or set FEMSTUDY_TLEM2=/path/to/femur_r.stl")
 
 
 def run_cli(*args: str, cwd: Path | None = None, env: dict | None = None,

@@ -1,7 +1,7 @@
 """Verification models for the FE tests: structured tubes, their loads and beam theory.
 
 Models are cached per process so several tests share one assembly. Material: the thesis's
-cortical bone (E = 16 GPa, ν = 0.4, ρ = 1700 kg/m³), the default of MaterialsSpec.
+cortical bone (E = 16 GPa, ν = 0.4, ρ = 1700 kg/m³), the default of BoneMaterials.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 import scipy.linalg
 import skfem
 
-from femstudy.casefile import MaterialsSpec
+from femstudy.materials import BoneMaterials
 from femstudy.fe import assemble, fix_facets
 from femstudy.fe.geometry import tube_mesh
 
@@ -24,7 +24,7 @@ LENGTH, R_OUT, R_IN = 600.0, 14.0, 6.5
 
 @lru_cache(maxsize=None)
 def tube(n_radial: int, n_around: int, n_along: int, order: int, length: float = LENGTH):
-    return assemble(tube_mesh(length, R_OUT, R_IN, n_radial, n_around, n_along), MaterialsSpec(), order=order)
+    return assemble(tube_mesh(length, R_OUT, R_IN, n_radial, n_around, n_along), BoneMaterials(), order=order)
 
 
 def end_facets(system, z: float) -> np.ndarray:

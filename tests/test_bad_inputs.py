@@ -2,7 +2,6 @@
 a non-zero exit, no traceback, and writes nothing."""
 
 import tomllib
-from pathlib import Path
 
 import pytest
 

@@ -81,3 +81,18 @@ def test_overrides_are_validated_like_the_file():
         with_overrides(case, {"drilling.feed": 1.5})
     with pytest.raises(UserError, match="drilling.feed_mm_s: Input should be greater than 0"):
         with_overrides(case, {"drilling.feed_mm_s": -1})
+
+
+def test_a_bad_sweep_file_is_refused_with_its_key_and_line(tmp_path):
+    from femstudy.sweeps.spec import read_parameter_sweep
+
+    path = tmp_path / "s.toml"
+    path.write_text('case = "c.toml"\n\n[grid]\n"drilling.feed_mm_s" = []\n')
+    with pytest.raises(UserError, match=r"s\.toml:4: grid\.drilling\.feed_mm_s: List should have at least 1 item"):
+        read_parameter_sweep(path)
+    path.write_text('case = "c.toml"\nnmae = "x"\n[grid]\n"a.b" = [1]\n')
+    with pytest.raises(UserError, match=r"s\.toml:2: nmae: unknown key; did you mean 'name'"):
+        read_parameter_sweep(path)
+    path.write_text('case = "c.toml"\n')
+    with pytest.raises(UserError, match=r"give a \[grid\] or at least one \[\[point\]\]"):
+        read_parameter_sweep(path)

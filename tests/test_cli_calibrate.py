@@ -69,7 +69,7 @@ def test_calibrate_recovers_the_generating_friction_and_saves_a_usable_bone_set(
 
     case_file = tmp_path / "case.toml"
     case_file.write_text('name = "own-bone"\n[drilling]\nbone = "testbone"\nfeed_mm_s = 1.5\nspindle_rpm = 1250\n')
-    friction = case_loading(load_case(case_file), 6.0).conditions.friction
+    friction = case_loading(load_case(case_file, bone_library), 6.0, bone_library).conditions.friction
     c = conditions[(1.5, 1250.0)]
     assert friction == pytest.approx((float(c["mu_f"]), float(c["mu_w"])), rel=0.05)
 

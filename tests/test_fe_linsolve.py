@@ -1,24 +1,23 @@
 """Linear solvers: every installed method gives the same answer, and the choice falls back
 to pure scipy when the fast packages are missing."""
 
+import logging
+
 import numpy as np
 import pytest
 
 from fe_cases import clamped_both_ends, tube
-from femstudy.console import Console
 from femstudy.errors import UserError
-from femstudy.fe import linsolve
-from femstudy.fe.static import near_null_space, reduced
+from femstudy.fe import factorize, linsolve
 
 
 @pytest.fixture(scope="module")
 def problem():
     # a stubby tube (L/D ≈ 2): well conditioned enough for AMG-CG to converge quickly too
     system = tube(2, 16, 6, 2, length=60.0)
-    bc = clamped_both_ends(system, length=60.0)
-    K = reduced(system, bc, "K")
-    b = np.random.default_rng(2).standard_normal((K.shape[0], 2))
-    return K, b, near_null_space(system, bc)
+    fs = factorize(system, clamped_both_ends(system, length=60.0), "superlu")
+    b = np.random.default_rng(2).standard_normal((fs.n_free, 2))
+    return fs.K, b, fs.near_null_space()
 
 
 @pytest.mark.parametrize("method", linsolve.available())
@@ -41,13 +40,14 @@ def hide(monkeypatch, *packages):
     monkeypatch.setattr(linsolve, "_installed", lambda name: name not in packages and real(name))
 
 
-def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, capsys):
+def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, caplog):
     K, b, B = problem
     hide(monkeypatch, "pypardiso", "sksparse.cholmod")
     assert linsolve.available() == ["superlu", "amg"]
-    factor = linsolve.factorize(K, near_null=B, console=Console())
+    with caplog.at_level(logging.INFO, logger="femstudy"):
+        factor = linsolve.factorize(K, near_null=B)
     assert factor.method == "superlu"
-    assert "linear solver superlu" in capsys.readouterr().err
+    assert "linear solver superlu" in caplog.text
     assert np.linalg.norm(K @ factor.solve(b) - b) < 1e-10 * np.linalg.norm(b)
     # large problems go to AMG-CG, whose memory grows linearly, rather than to SuperLU
     assert linsolve.choose(10 * linsolve.SUPERLU_MAX_DOFS) == ["amg", "superlu"]
@@ -56,20 +56,20 @@ def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, capsys):
 
 
 @pytest.mark.skipif("pardiso" not in linsolve.available(), reason="pypardiso not installed")
-def test_pardiso_that_does_not_fit_gives_way(problem, monkeypatch, capsys):
+def test_pardiso_that_does_not_fit_gives_way(problem, monkeypatch, caplog):
     K, b, B = problem
     monkeypatch.setattr(linsolve, "available_memory_bytes", lambda: 1024)
-    factor = linsolve.factorize(K, near_null=B, console=Console())
+    with caplog.at_level(logging.INFO, logger="femstudy"):
+        factor = linsolve.factorize(K, near_null=B)
     assert factor.method == "amg"  # no other direct method would fit either
-    assert "pardiso does not fit in memory" in capsys.readouterr().err
+    assert "pardiso does not fit in memory" in caplog.text
     with pytest.raises(UserError, match="does not fit in memory"):
         linsolve.factorize(K, "pardiso")
 
 
 def test_solver_choice_can_be_forced_and_is_checked(problem, monkeypatch):
     K, b, B = problem
-    monkeypatch.setenv("FEMSTUDY_SOLVER", "superlu")
-    assert linsolve.factorize(K).method == "superlu"
+    assert linsolve.factorize(K, "superlu").method == "superlu"
     with pytest.raises(UserError, match="unknown linear solver 'mumps'"):
         linsolve.factorize(K, "mumps")
     hide(monkeypatch, "pypardiso")

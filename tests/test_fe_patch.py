@@ -6,7 +6,7 @@ import pytest
 import scipy.sparse.linalg as spla
 import skfem
 
-from femstudy.casefile import MaterialsSpec
+from femstudy.materials import BoneMaterials
 from femstudy.fe import assemble, element_stress
 from femstudy.fe.materials import CORTICAL_TRANSVERSELY_ISOTROPIC, frame_with_axis, rotate_stiffness
 from femstudy.femur_model import TetMesh
@@ -34,7 +34,7 @@ def linear_field(x: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize("order", [1, 2])
 @pytest.mark.parametrize("model", ["isotropic", "transversely_isotropic"])
 def test_linear_field_is_reproduced_to_round_off(order, model):
-    system = assemble(distorted_box(), MaterialsSpec(cortical_model=model), order=order,
+    system = assemble(distorted_box(), BoneMaterials(cortical_model=model), order=order,
                       long_axis=np.array([1.0, 2.0, 2.0]) / 3)
     exact = linear_field(system.nodes).ravel()
     boundary = np.unique(system.dofs.get_facet_dofs(system.mesh.boundary_facets()).flatten())
@@ -52,7 +52,7 @@ def test_linear_field_is_reproduced_to_round_off(order, model):
 
 def test_transversely_isotropic_cortex_is_oriented_along_the_long_axis():
     axis = np.array([0.0, 0.6, 0.8])
-    system = assemble(distorted_box(), MaterialsSpec(cortical_model="transversely_isotropic"), long_axis=axis)
+    system = assemble(distorted_box(), BoneMaterials(cortical_model="transversely_isotropic"), long_axis=axis)
     D = system.materials.D[0]
     expected = rotate_stiffness(CORTICAL_TRANSVERSELY_ISOTROPIC.stiffness(), frame_with_axis(axis))
     np.testing.assert_allclose(D, expected)

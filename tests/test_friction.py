@@ -81,7 +81,7 @@ def test_calibrated_range():
 def test_bone_set_round_trips_through_the_library(bone_library):
     original = friction.builtin_bone_set("human")
     (bone_library / "mine.toml").write_text(original.to_toml())
-    loaded = friction.load_bone_set("mine")
+    loaded = friction.load_bone_set("mine", bone_library)
     np.testing.assert_allclose(loaded.a, original.a)
     np.testing.assert_allclose(loaded.b, original.b)
     assert loaded.u1_MPa == original.u1_MPa
@@ -89,4 +89,26 @@ def test_bone_set_round_trips_through_the_library(bone_library):
 
 def test_unknown_bone_set_names_the_choices(bone_library):
     with pytest.raises(UserError, match="unknown bone coefficient set 'goat'.*bovine, human"):
-        friction.load_bone_set("goat")
+        friction.load_bone_set("goat", bone_library)
+
+
+def test_a_bad_bone_set_file_is_refused_with_its_key_and_line(tmp_path):
+    good = friction.builtin_bone_set("human").to_toml()
+    text = good.replace("mu_f = ", "mu_f = -", 1)
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    line = next(k for k, row in enumerate(text.splitlines(), 1) if "mu_f = -" in row)
+    with pytest.raises(UserError, match=rf"bone set .*bad\.toml:{line}: condition\.0\.mu_f: Input should be greater "
+                                        r"than 0, got -"):
+        friction.read_bone_set_file(path)
+    path.write_text(good.replace("u1_MPa", "u1_mpa"))
+    with pytest.raises(UserError, match="u1_mpa: unknown key; did you mean 'u1_MPa'"):
+        friction.read_bone_set_file(path)
+
+
+def test_the_printed_human_equations_are_available_as_a_bone_set():
+    """'human-printed' gives Table 5-12's printed coefficients (Eqs 5.8/5.9)."""
+    printed = friction.builtin_bone_set("human-printed")
+    np.testing.assert_allclose(printed.a, [63.48, -102.7, -9.106, 14.25], rtol=2e-3)
+    np.testing.assert_allclose(printed.b, [193.9, -290.2, -27.20, 40.63], rtol=2e-3)
+    assert friction.builtin_bone_set("human").friction(2.0, 1500) != pytest.approx(printed.friction(2.0, 1500))

@@ -15,7 +15,8 @@ import pytest
 from conftest import TLEM2_FEMUR, assert_clean_failure, run_cli
 from femstudy.casefile import parse_case
 from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
-from femstudy.meshing import build_femur_model, cache, landmarks, model as model_module, tetra
+from femstudy.meshing import cache, landmarks, model as model_module, tetra
+from femstudy.study.femur import femur_model, femur_spec
 
 SIZE_MM = 16.0  # coarse: seconds of TetWild, not minutes; the drill site is refined to 1 mm anyway
 CASE = """
@@ -32,10 +33,8 @@ def cache_dir(mesh_cache):
 
 
 def _build(text, cache_dir, size=SIZE_MM):
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("FEMSTUDY_CACHE", str(cache_dir))
-        case = parse_case(text)
-        return case, build_femur_model(case, mesh_size_mm=size)
+    case = parse_case(text)
+    return case, femur_model(case, cache_dir, size)
 
 
 @pytest.fixture(scope="session")
@@ -191,13 +190,13 @@ def forbid_tetwild(cache_dir, monkeypatch):
         raise AssertionError("TetWild ran although its mesh was cached")
 
     monkeypatch.setattr(tetra, "tetrahedralize", no_tetwild)
-    monkeypatch.setenv("FEMSTUDY_CACHE", str(cache_dir))
 
 
-def test_cached_rebuild_skips_tetwild(builtin, forbid_tetwild):
+def test_cached_rebuild_skips_tetwild(builtin, forbid_tetwild, cache_dir):
     case, first = builtin
-    again = build_femur_model(case, mesh_size_mm=SIZE_MM)
-    assert again.stats["cache_hit"] and not first.stats["cache_hit"]
+    again = femur_model(case, cache_dir, SIZE_MM)
+    # ``first`` may itself come from the session cache; TetWild being forbidden is the check
+    assert again.stats["cache_hit"]
     assert again.stats["cache_key"] == first.stats["cache_key"]
     assert np.array_equal(again.mesh.tets, first.mesh.tets) and np.array_equal(again.mesh.region, first.mesh.region)
     assert np.array_equal(again.clamps.proximal, first.clamps.proximal)
@@ -205,17 +204,17 @@ def test_cached_rebuild_skips_tetwild(builtin, forbid_tetwild):
     assert again.stats["load_or_build_seconds"] < 0.2 * first.stats["tetwild_seconds"]
 
 
-def test_another_drill_site_reuses_the_tetwild_stage(builtin, forbid_tetwild):
+def test_another_drill_site_reuses_the_tetwild_stage(builtin, forbid_tetwild, cache_dir):
     """Site refinement runs on the cached TetWild mesh: a new site costs no TetWild run."""
     _, first = builtin
     other = parse_case(CASE.replace("position = 0.5", "position = 0.3").replace('"anterior"', '"lateral"'))
-    moved = build_femur_model(other, mesh_size_mm=SIZE_MM)
+    moved = femur_model(other, cache_dir, SIZE_MM)
     assert not moved.stats["cache_hit"] and moved.stats["cache_key"] != first.stats["cache_key"]
     assert np.linalg.norm(moved.site.entry_point - first.site.entry_point) > 50
     assert moved.stats["site_facets_in_drill_disk"] >= 8
 
 
-def test_corrupted_cache_entry_is_reported_and_rebuilt(builtin, cache_dir, tmp_path, monkeypatch, capfd):
+def test_corrupted_cache_entry_is_reported_and_rebuilt(builtin, cache_dir, tmp_path, monkeypatch, caplog):
     case, first = builtin
     private = tmp_path / "cache"
     shutil.copytree(cache_dir / first.stats["cache_key"], private / first.stats["cache_key"])
@@ -224,7 +223,6 @@ def test_corrupted_cache_entry_is_reported_and_rebuilt(builtin, cache_dir, tmp_p
     data[len(data) // 2] ^= 0xFF
     npz.write_bytes(bytes(data))
     rebuilt = []
-    real_build = model_module._build
 
     def fake_build(*args):  # stands in for TetWild: hands back the entry's true contents
         rebuilt.append(True)
@@ -233,13 +231,12 @@ def test_corrupted_cache_entry_is_reported_and_rebuilt(builtin, cache_dir, tmp_p
         return arrays, {"frame": first.frame.as_dict(), "quality": first.quality,
                         "stats": {k: v for k, v in first.stats.items() if k not in ("cache_hit", "cache_key")}}
 
-    assert real_build is not fake_build
     monkeypatch.setattr(model_module, "_build", fake_build)
-    monkeypatch.setenv("FEMSTUDY_CACHE", str(private))
-    again = build_femur_model(case, mesh_size_mm=SIZE_MM)
-    err = capfd.readouterr().err.strip().splitlines()
+    with caplog.at_level("WARNING", logger="femstudy"):
+        again = femur_model(case, private, SIZE_MM)
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert rebuilt and not again.stats["cache_hit"]
-    assert len(err) == 1 and "corrupted" in err[0] and "rebuilding" in err[0]
+    assert len(warnings) == 1 and "corrupted" in warnings[0] and "rebuilding" in warnings[0]
     assert cache.load(first.stats["cache_key"], private) is not None  # a good entry again
 
 
@@ -248,9 +245,8 @@ def test_interrupted_build_leaves_no_entry(tmp_path, monkeypatch):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(tetra, "tetrahedralize", interrupted)
-    monkeypatch.setenv("FEMSTUDY_CACHE", str(tmp_path))
     with pytest.raises(KeyboardInterrupt):
-        build_femur_model(parse_case(CASE), mesh_size_mm=SIZE_MM)
+        femur_model(parse_case(CASE), tmp_path, SIZE_MM)
     assert not [p for p in tmp_path.iterdir() if not p.name.startswith(".")]
 
 
@@ -258,7 +254,8 @@ def test_cache_key_follows_mesh_parameters_only():
     base = parse_case(CASE)
 
     def key(text, size=SIZE_MM):
-        return cache.cache_key({"surface_sha256": "x", **model_module.mesh_parameters(parse_case(text), size)})
+        return cache.cache_key({"surface_sha256": "x", **model_module.mesh_parameters(femur_spec(parse_case(text)),
+                                                                                       size)})
 
     k0 = key(CASE)
     assert key(CASE + "[clamps]\nlength_mm = 30\n") == k0  # clamps do not change the mesh
@@ -266,6 +263,7 @@ def test_cache_key_follows_mesh_parameters_only():
     assert key(CASE, size=8.0) != k0
     assert key(CASE + "[geometry.cortex]\nmidshaft_mm = 5\n") != k0
     assert key(CASE.replace("0.5", "0.4")) != k0
+    assert key(CASE + "[drill]\ndiameter_mm = 3.2\n") != k0  # the drill's radius sets the refined core
     assert base.mesh.refine == "site"
 
 
@@ -342,8 +340,27 @@ def test_repairs_are_stated(tmp_path):
     assert surf.volume == pytest.approx(read_surface(BUILTIN_STL).volume, rel=1e-9)
 
 
-def test_cache_root_default_and_env(monkeypatch, tmp_path):
-    monkeypatch.delenv("FEMSTUDY_CACHE", raising=False)
-    assert str(cache.cache_root()) == ".femstudy-cache"
-    monkeypatch.setenv("FEMSTUDY_CACHE", str(tmp_path))
-    assert cache.cache_root() == tmp_path
+def test_the_command_line_reads_the_cache_folder_from_the_environment(tmp_path):
+    from femstudy.cli import Settings
+
+    assert Settings.from_environment({}).cache_dir == cache.DEFAULT_CACHE_DIR
+    assert Settings.from_environment({"FEMSTUDY_CACHE": str(tmp_path)}).cache_dir == tmp_path
+
+
+def test_a_wider_drill_is_refined_and_loaded_at_its_own_radius(builtin, forbid_tetwild, cache_dir):
+    """A 3.2 mm drill: the site is refined to the site size over twice its 1.6 mm radius, and
+    the load patch the study builds covers π · 1.6² (the radius comes from the case, not a constant)."""
+    from femstudy import fe
+    from femstudy.meshing.refine import LONGEST_PER_TARGET
+
+    case = parse_case(CASE + "[drill]\ndiameter_mm = 3.2\n")
+    model = femur_model(case, cache_dir, SIZE_MM)
+    assert model.stats["drill_radius_mm"] == pytest.approx(1.6)
+    x = model.mesh.points[model.mesh.tets]
+    centroid_distance = np.linalg.norm(x.mean(axis=1) - model.site.entry_point, axis=1)
+    edges = np.linalg.norm(x[:, [0, 0, 0, 1, 1, 2]] - x[:, [1, 2, 3, 2, 3, 3]], axis=2).max(axis=1)
+    core = centroid_distance < 2 * 1.6 - case.mesh.site_size_mm  # whole tets inside the refined core
+    assert core.sum() > 50 and edges[core].max() <= LONGEST_PER_TARGET * case.mesh.site_size_mm + 1e-9
+    system = fe.assemble(model.mesh, order=1)
+    patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
+    assert patch.area_mm2 == pytest.approx(np.pi * 1.6 ** 2, rel=0.1)

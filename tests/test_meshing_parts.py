@@ -195,6 +195,18 @@ def test_cortex_filling_the_bone_is_a_user_error(femur):
                              voxel_mm=3.0)
 
 
+def test_level_surface_through_grid_nodes_is_all_triangles():
+    """An octahedron |x| + |y| + |z| = 5 on a 1 mm grid passes through grid nodes: contouring
+    gives collapsed triangles, which cleaning turned into lines and quadric decimation refused."""
+    x = np.stack(np.meshgrid(*[np.arange(-7.0, 8)] * 3, indexing="ij"), axis=-1)
+    field = 5 - np.abs(x).sum(axis=-1)
+    fields = regions.RegionFields(np.full(3, -7.0), 1.0, field, field, field, np.zeros((2, 3)))
+    surf = regions.level_surface(fields, "inner")
+    assert surf.is_all_triangles and surf.n_lines == 0 and surf.n_verts == 0
+    assert surf.volume == pytest.approx(4 / 3 * 5 ** 3, rel=1e-6)  # the octahedron, exactly
+    assert surf.decimate(0.5, volume_preservation=True).n_cells > 0
+
+
 def test_pinched_boundary_is_filled():
     """Two solid blocks touching along one edge only: the empty tets around that edge are
     filled with the region of the solid tets around it, and the boundary becomes manifold."""

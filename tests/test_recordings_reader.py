@@ -45,7 +45,7 @@ def test_torque_in_newton_metres_is_converted_explicitly(tmp_path):
     a = read_recording(write(tmp_path, HEADER + "time_s,thrust_N,torque_Nmm\n" + body, "a.csv"))
     b = read_recording(write(tmp_path, HEADER + "time_s,thrust_N,torque_Nm\n" + nm, "b.csv"))
     np.testing.assert_allclose(b.torque_Nmm, a.torque_Nmm, rtol=1e-12, atol=1e-12)
-    assert any("torque_Nm converted to N·mm (x1000)" in n for n in b.notes)
+    assert b.notes == ("torque_Nm converted from Nm to N·mm (x1000)",)
     assert not a.notes
 
 
@@ -78,11 +78,20 @@ BAD = [
     ("", "recording rec.csv is empty"),
     (HEADER, "has no column line"),
     (HEADER + "time_s,thrust_N\n", "has a column line but no data rows"),
-    (HEADER + "time_s,torque_Nmm\n0,1\n", "has no thrust_N column (newtons); its columns are: time_s, torque_Nmm"),
+    (HEADER + "time_s,torque_Nmm\n0,1\n",
+     "has no thrust_N column (newtons), nor another thrust column (fz, thrust) with a unit; its columns are: "
+     "time_s, torque_Nmm"),
     (HEADER + "time,thrust_N\n0,1\n", "column 'time' has no unit; name it time_s (seconds)"),
     (HEADER + "time_s,thrust_N,torque\n0,1,2\n",
      "column 'torque' has no unit; name it torque_Nmm (N·mm) or torque_Nm (N·m)"),
-    (HEADER + "time_s,thrust_kN\n0,1\n", "column 'thrust_kN' has unit 'kN', which femstudy does not convert"),
+    (HEADER + "time_s,thrust_mm\n0,1\n",
+     "column 'thrust_mm' is in mm (a length); thrust needs a force unit such as N, kN or lbf"),
+    (HEADER + "time_s,thrust_N,torque_N\n0,1,2\n",
+     "column 'torque_N' is in N (a force); torque needs a torque unit such as N·mm, N·m or lbf·in"),
+    (HEADER + "time_s,thrust_furlong\n0,1\n",
+     "column 'thrust_furlong' is in furlong (a length)"),
+    (HEADER + "time_s,thrust_Newtons\n0,1\n",
+     "column 'thrust_Newtons' has unit 'Newtons', which is not a unit femstudy knows; thrust needs a force unit"),
     (HEADER + "time_s,thrust_N,torque_Nm,torque_Nmm\n0,1,2,3\n", "has two torque columns"),
     (HEADER + "time_s,thrust_N\n0,1\n0.001,nan\n0.002,3\n", "thrust_N is nan at line 5"),
     (HEADER + "time_s,thrust_N\n0,1\n0.001,2\n0.002,-inf\n", "thrust_N is -inf at line 6"),
@@ -98,7 +107,12 @@ BAD = [
      "shorter than one spindle revolution (0.04 s at 1500 rpm)"),
     ("# feed_mm_s = 1.5\ntime_s,thrust_N\n0,1\n", "has no spindle_rpm"),
     ("# feed_mm_s = -1.5\n# spindle_rpm = 1500\ntime_s,thrust_N\n0,1\n",
-     "metadata feed_mm_s = -1.5 is invalid: input should be greater than 0"),
+     "rec.csv, line 1: feed_mm_s: Input should be greater than 0, got -1.5"),
+    ("# feed_mm_s = 1.5\n# spindle_rpm = 1500\n# drill_diameter_mm = \"big\"\ntime_s,thrust_N\n0,1\n",
+     "rec.csv, line 3: drill_diameter_mm: Input should be a valid number, unable to parse string as a number, "
+     "got \"big\""),
+    ("# feed_mm_per_s = 1.5\n# spindle_rpm = 1500\ntime_s,thrust_N\n0,1\n",
+     "has no feed_mm_s (line 1 has feed_mm_per_s: a misspelling?)"),
     ("# feed_mm_s = 1.5\n# spindle_rpm = fast\ntime_s,thrust_N\n0,1\n",
      "line 2: '# spindle_rpm = fast' is not 'key = value' with a TOML value"),
     (HEADER + "# samples = 3000000000\ntime_s,thrust_N\n0,1\n", "the header claims 3,000,000,000 samples"),
@@ -120,7 +134,7 @@ def test_bad_recordings_give_one_clear_sentence(tmp_path, text, message):
 def test_missing_file_and_folder_and_non_utf8(tmp_path):
     with pytest.raises(UserError, match="does not exist"):
         read_recording(tmp_path / "nope.csv")
-    with pytest.raises(UserError, match="is not a file"):
+    with pytest.raises(UserError, match="is a folder; give one recording file"):
         read_recording(tmp_path)
     (tmp_path / "latin.csv").write_bytes(HEADER.encode() + b"# specimen = \"f\xe9mur\"\ntime_s,thrust_N\n")
     with pytest.raises(UserError, match="not a text \\(UTF-8\\) CSV file"):

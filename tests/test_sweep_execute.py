@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from femstudy.sweep.execute import Point, execute
+from femstudy.sweeps.execute import Point, execute
 from sweep_helpers import square
 
 POINTS = [Point("study", {"x": x}, label=f"x={x}") for x in range(6)]
@@ -58,7 +58,7 @@ def test_memory_admission_runs_oversized_points_one_at_a_time(tmp_path):
 KILL_SCRIPT = """
 import sys
 sys.path.insert(0, {tests!r})
-from femstudy.sweep.execute import Point, execute
+from femstudy.sweeps.execute import Point, execute
 from sweep_helpers import square
 points = [Point("study", {{"x": x}}, label=f"x={{x}}") for x in range(8)]
 execute(points, {folder!r}, square, (0.4,))

@@ -49,13 +49,16 @@ def oblique_tube(**shape):
 
 def newmark_fields(model: femstudy_side.Model, mass_intorder: int | None) -> np.ndarray:
     """Every step's field (steps, 3n) [mm] of the stand-in's Newmark loop."""
-    system = standin.assemble(model.mesh, model.materials, mass_intorder=mass_intorder)
+    from femstudy.fe import StepRecorder
+
+    system = standin.assemble(model.mesh, model.materials.to_fe(), mass_intorder=mass_intorder)
     patch = standin.drill_patch(system, model.site, radius_mm=model.patch_radius_mm)
-    bc = standin.clamp(system, model.clamps)
+    fs = standin.factorize(system, standin.clamp(system, model.clamps))
     steps = tuple(range(1, len(model.times_s)))
-    history = standin.solve_transient(system, bc, patch.patterns, np.column_stack([model.thrust_N, model.torque_Nmm]),
-                                      model.times_s, keep=steps)
-    return np.array([history.fields[k] for k in steps])
+    recorder = StepRecorder([], len(model.times_s), keep=steps)
+    standin.solve_transient(fs, patch.patterns, np.column_stack([model.thrust_N, model.torque_Nmm]), model.times_s,
+                            observer=recorder)
+    return np.array([recorder.fields[k] for k in steps])
 
 
 def static_check(work: Path, materials: MaterialsSpec) -> None:
@@ -105,7 +108,7 @@ def transient_check(work: Path, title: str, model: femstudy_side.Model) -> None:
 def frequencies(model: femstudy_side.Model) -> None:
     found = {}
     for intorder in (None, 2):
-        system = standin.assemble(model.mesh, model.materials, mass_intorder=intorder)
+        system = standin.assemble(model.mesh, model.materials.to_fe(), mass_intorder=intorder)
         free = standin.clamp(system, model.clamps).free
         lam = spla.eigsh(system.K[free][:, free], k=4, M=system.M[free][:, free], sigma=0, which="LM")[0]
         found[intorder] = np.sqrt(np.sort(lam)) / (2 * np.pi)

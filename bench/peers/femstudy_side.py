@@ -9,9 +9,9 @@ times femstudy solving the same model in its own process.
 The FE module is chosen by name: ``"femstudy"`` is :mod:`femstudy.fe`, ``"standin"`` the
 scikit-fem stand-in :mod:`bench.peers.standin` with the same interface. Only this file
 touches the solver's objects, and only these names: ``assemble``, ``drill_patch``, ``clamp``,
-``solve_static``, ``solve_transient(system, bc, patterns, amplitudes, times_s, keep=,
-observe=)``; ``system.nodes/cells/region/n_dofs``, ``patch.thrust/torque/patterns``, ``bc.fixed``,
-``result.time_s/summary["max_deflection_mm"]/fields``.
+``factorize``, ``solve_static(fs, f)``, ``solve_transient(fs, patterns, amplitudes, times_s,
+observer=)`` (the observer is :class:`femstudy.fe.StepRecorder`, given every stepped field);
+``system.nodes/cells/region/n_dofs``, ``patch.thrust/torque/patterns``, ``bc.fixed``.
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ def fe_module(name: str):
 
 def setup(fe, model: Model):
     """femstudy's system, drill patch and constraints for ``model``."""
-    system = fe.assemble(model.mesh, model.materials, order=2)
+    system = fe.assemble(model.mesh, model.materials.to_fe(), order=2)
     patch = fe.drill_patch(system, model.site, radius_mm=model.patch_radius_mm)
     bc = fe.clamp(system, model.clamps)
     return system, patch, bc
@@ -89,26 +89,31 @@ def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
     """``static``: u (3n,) [mm] under F·thrust + T·torque. ``transient``: per-step drill-point
     deflection, maximum deflection over all nodes and over the surface nodes (those CalculiX
     writes; the largest deflection can lie just inside) [mm], and the final field."""
+    from femstudy.fe import StepRecorder, deflection_channel, point_channel
+
     if system is None:
         system, patch, bc = setup(fe, model)
+    fs = fe.factorize(system, bc)
     if analysis == "static":
         force = model.static_thrust_N * patch.thrust + model.static_torque_Nmm * patch.torque
-        return fe.solve_static(system, bc, force)
+        return fe.solve_static(fs, force)
     drill, surface = drill_node(system.nodes, model.site), surface_nodes(system.cells)
-
-    def observe(step, t, u):
-        nodal = u.reshape(-1, 3)
-        return {"drill_point_mm": float(np.linalg.norm(nodal[drill])),
-                "surface_max_deflection_mm": float(np.linalg.norm(nodal[surface], axis=1).max())}
-
-    result = fe.solve_transient(system, bc, patch.patterns, np.column_stack([model.thrust_N, model.torque_Nmm]),
-                                model.times_s, keep=(-1,), observe=observe)
-    return {"times_s": np.asarray(result.time_s), "drill_point_mm": result.summary["drill_point_mm"],
-            "max_deflection_mm": result.summary["max_deflection_mm"],
-            "surface_max_deflection_mm": result.summary["surface_max_deflection_mm"],
-            "u_final": result.fields[len(model.times_s) - 1],
-            "scheme": getattr(result, "scheme", "stepping"),  # the stand-in always steps
-            "krylov_vectors": getattr(result, "timings", {}).get("krylov_vectors", 0)}
+    surface_mask = np.zeros(len(system.nodes), bool)
+    surface_mask[surface] = True
+    selector = np.zeros((3, system.n_dofs))
+    selector[np.arange(3), 3 * drill + np.arange(3)] = 1.0
+    n = len(model.times_s)
+    recorder = StepRecorder([deflection_channel(system, {"surface": surface_mask}),
+                             point_channel("drill_point", selector, system.nodes[drill])], n, keep=(n - 1,))
+    result = fe.solve_transient(fs, patch.patterns, np.column_stack([model.thrust_N, model.torque_Nmm]),
+                                model.times_s, observer=recorder)
+    history = recorder.history()
+    every = np.arange(n)
+    assert np.array_equal(history.recorded_steps, every), "the benchmark compares every step"
+    return {"times_s": np.asarray(model.times_s), "drill_point_mm": history["drill_point"].values,
+            "max_deflection_mm": history["deflection"].values,
+            "surface_max_deflection_mm": history["deflection/surface"].values,
+            "u_final": recorder.fields[n - 1], "scheme": result.scheme, "krylov_vectors": result.n_vectors}
 
 
 def build_peer_case(fe, model: Model) -> PeerCase:
@@ -120,12 +125,13 @@ def build_peer_case(fe, model: Model) -> PeerCase:
     if len(bc.fixed) != 3 * len(fixed_nodes):
         raise ValueError("the clamps hold some nodes in only some directions; peers fix whole nodes")
     codes = np.unique(system.region)
-    spec = {CORTICAL: model.materials.cortical, CANCELLOUS_PROXIMAL: model.materials.cancellous,
-            CANCELLOUS_DISTAL: model.materials.cancellous}
+    materials = model.materials.to_fe()
+    spec = {CORTICAL: materials.cortical, CANCELLOUS_PROXIMAL: materials.cancellous,
+            CANCELLOUS_DISTAL: materials.cancellous}
     return PeerCase(nodes=np.asarray(system.nodes), elements=np.asarray(system.cells),
                     region=np.asarray(system.region), material_codes=codes,
-                    youngs_modulus_MPa=np.array([spec[c].youngs_modulus_MPa for c in codes]),
-                    poissons_ratio=np.array([spec[c].poissons_ratio for c in codes]),
+                    youngs_modulus_MPa=np.array([spec[c].E_MPa for c in codes]),
+                    poissons_ratio=np.array([spec[c].nu for c in codes]),
                     density_t_mm3=np.array([spec[c].density_t_mm3 for c in codes]),
                     fixed_nodes=fixed_nodes, thrust=np.asarray(patch.thrust), torque=np.asarray(patch.torque),
                     static_thrust_N=model.static_thrust_N, static_torque_Nmm=model.static_torque_Nmm,

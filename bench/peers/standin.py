@@ -23,7 +23,7 @@ from skfem import (Basis, BilinearForm, ElementTetP2, ElementVector, FacetBasis,
 from skfem.helpers import dot
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
-from femstudy.casefile import MaterialsSpec
+from femstudy.materials import BoneMaterials
 from femstudy.export.p2 import p2_layout
 from femstudy.femur_model import (CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, Clamps, DrillSite,
                                   TetMesh)
@@ -120,22 +120,30 @@ class Constraints:
 
 
 @dataclass
+class Factorized:
+    """The clamped model: K and M restricted to the free DOFs, and the solver of K_ff."""
+
+    system: "System"
+    bc: Constraints
+    solve: Callable[[np.ndarray], np.ndarray]
+
+
+@dataclass
 class TransientResult:
-    """Per-step summary columns (``max_deflection_mm`` and what ``observe`` adds) and the full
-    fields [mm] of the steps asked for."""
+    """The march's times; the fields go to the observer."""
 
     time_s: np.ndarray
-    summary: dict
-    fields: dict
+    scheme: str = "stepping"
+    n_vectors: int = 0
 
 
-def region_materials(materials: MaterialsSpec) -> dict:
+def region_materials(materials: BoneMaterials) -> dict:
     """Region code -> material: cortical for region 1, cancellous for the two others."""
     return {CORTICAL: materials.cortical, CANCELLOUS_PROXIMAL: materials.cancellous,
             CANCELLOUS_DISTAL: materials.cancellous}
 
 
-def assemble(mesh: TetMesh, materials: MaterialsSpec, order: int = 2, mass_intorder: int | None = None
+def assemble(mesh: TetMesh, materials: BoneMaterials, order: int = 2, mass_intorder: int | None = None
              ) -> System:
     """K = Σ_regions ∫ ε(v) : C_r ε(u) dV and M = Σ_regions ∫ ρ_r v·u dV.
 
@@ -154,7 +162,7 @@ def assemble(mesh: TetMesh, materials: MaterialsSpec, order: int = 2, mass_intor
         if len(cells) == 0:
             continue
         part = basis.with_elements(cells)
-        K = K + linear_elasticity(*lame_parameters(spec.youngs_modulus_MPa, spec.poissons_ratio)).assemble(part)
+        K = K + linear_elasticity(*lame_parameters(spec.E_MPa, spec.nu)).assemble(part)
         mass_basis = part if mass_intorder is None else Basis(skmesh, element, elements=cells,
                                                               intorder=mass_intorder)
         M = M + _mass(spec.density_t_mm3).assemble(mass_basis)
@@ -227,45 +235,41 @@ def _factorise(A: sp.spmatrix) -> Callable[[np.ndarray], np.ndarray]:
         return lu.solve
 
 
-def solve_static(system: System, bc: Constraints, force: np.ndarray) -> np.ndarray:
+def factorize(system: System, bc: Constraints) -> Factorized:
+    """K_ff factorised once."""
+    return Factorized(system, bc, _factorise(system.K[bc.free][:, bc.free]))
+
+
+def solve_static(fs: Factorized, force: np.ndarray) -> np.ndarray:
     """u with K u = f on the free DOFs and u = 0 on the fixed ones [mm]."""
-    return bc.expand(_factorise(system.K[bc.free][:, bc.free])(force[bc.free]))
+    return fs.bc.expand(fs.solve(force[fs.bc.free]))
 
 
-def solve_transient(system: System, bc: Constraints, patterns: np.ndarray, amplitudes: np.ndarray,
-                    times_s: np.ndarray, *, keep=(), observe=None) -> TransientResult:
+def solve_transient(fs: Factorized, patterns: np.ndarray, amplitudes: np.ndarray, times_s: np.ndarray, *,
+                    observer=None) -> TransientResult:
     """Newmark average acceleration (β = 1/4, γ = 1/2), undamped, fixed Δt = times_s[1] − times_s[0].
 
     M a + K u = f(t_n) = patterns @ amplitudes[n]; from rest, with M a_0 = f(t_0).
     K_eff = K + 4/Δt² M is factorised once;  u_{n+1} = K_eff⁻¹ [f_{n+1} + M(4/Δt² u_n + 4/Δt v_n + a_n)],
     a_{n+1} = 4/Δt² (u_{n+1} − u_n) − 4/Δt v_n − a_n,  v_{n+1} = v_n + Δt/2 (a_n + a_{n+1}).
-    ``observe(step, t, u)`` returns extra summary columns; ``keep`` lists steps whose field is kept.
+    ``observer.step(n, u)`` receives every step's full field.
     """
     t = np.asarray(times_s, dtype=float)
     dt = float(t[1] - t[0])
+    system, bc = fs.system, fs.bc
     free = bc.free
     K, M = system.K[free][:, free], system.M[free][:, free]
     P = np.asarray(patterns)[free]
-    keep = {range(len(t))[k] for k in keep}
     u, v = np.zeros(len(free)), np.zeros(len(free))
     a = _factorise(M)(P @ amplitudes[0]) if np.any(amplitudes[0]) else np.zeros(len(free))
     keff = _factorise(K + (4 / dt**2) * M)
-    columns, fields = {}, {}
-
-    def record(n):
-        full = bc.expand(u)
-        row = {"time_s": t[n], "max_deflection_mm": np.linalg.norm(full.reshape(-1, 3), axis=1).max()}
-        row.update(observe(n, t[n], full) if observe else {})
-        for key, value in row.items():
-            columns.setdefault(key, []).append(value)
-        if n in keep:
-            fields[n] = full
-
-    record(0)
+    if observer is not None:
+        observer.step(0, bc.expand(u))
     for n in range(1, len(t)):
         u_new = keff(P @ amplitudes[n] + M @ ((4 / dt**2) * u + (4 / dt) * v + a))
         a_new = (4 / dt**2) * (u_new - u) - (4 / dt) * v - a
         v = v + dt / 2 * (a + a_new)
         u, a = u_new, a_new
-        record(n)
-    return TransientResult(t, {k: np.asarray(c) for k, c in columns.items()}, fields)
+        if observer is not None:
+            observer.step(n, bc.expand(u))
+    return TransientResult(t)

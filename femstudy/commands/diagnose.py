@@ -14,9 +14,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Compare a force/torque recording with a simulation: locate where they "
                                    "differ beyond the measurement noise, find which missing mechanisms "
                                    "(chip clogging, feed pulsation, sensor drift, thermal softening) explain "
-                                   "it, fit them and show the fit improve. Reports nothing when nothing is "
-                                   "missing. Exit status 0 whatever is found.")
-    p.add_argument("recording", type=Path, metavar="RECORDING.csv", help="the recording (femstudy format)")
+                                   "it, fit them and show the fit improve, and describe what none of them "
+                                   "explains. Reports nothing when nothing is missing. Exit status 0 whatever "
+                                   "is found.")
+    p.add_argument("recording", type=Path, metavar="RECORDING",
+                   help="the recording: CSV/TSV/text export, .tdms, .mat or .xlsx (docs/recordings.md)")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--simulation", type=Path, metavar="SIM.csv",
                       help="a simulated trace in the recording format (any sampling rate, span and "
@@ -39,31 +41,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from femstudy.console import Console
-    from femstudy.diagnosis import report
-    from femstudy.diagnosis.diagnose import diagnose
-    from femstudy.drilling.friction import load_bone_set
-    from femstudy.recordings import read_recording
+    from femstudy.diagnosis import diagnose
 
-    console = Console(args.quiet)
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
     require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
-    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override)
-    for note in rec.notes:
-        console.progress(note)
-    d = diagnose(rec, args.simulation, args.cortex_mm, load_bone_set(args.bone), progress=console.progress,
-                 model=args.model)
-    summary = report.summary_text(d)
-    print(summary)
-    if args.json:
-        report.write_json(args.json, d)
-        print(f"wrote {args.json}")
-    if args.plot:
-        report.plot(args.plot, d)
-        print(f"wrote {args.plot}")
-    if args.report:
-        report.write_report(args.report, d, summary)
-        print(f"wrote {args.report}/report.md")
-    console.progress(f"diagnosed in {d.seconds:.2f} s")
+    d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
+                 columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
+                 bone_library=args.settings.bones_dir)
+    print(d.summary())
+    for path in d.write(args.json, args.plot, args.report):
+        print(f"wrote {path}")
     return 0

@@ -37,13 +37,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from femstudy.errors import require
-    from femstudy.meshing.builtin_femur import generate, write_stl
+    from femstudy.meshing.builtin_femur import write_femur
 
     require(args.out.suffix.lower() == ".stl", f"--out must end in .stl, got '{args.out}'")
     par = FemurParameters(**{name: getattr(args, name) for name in _HELP})
-    surf = generate(par)
-    out = args.out.resolve()  # write through a link (meshes/ links to the packaged file)
-    write_stl(out, surf, header=f"femstudy built-in femur {par.digest()}")
+    surf = write_femur(args.out, par)  # written through a link (meshes/ links to the packaged file)
     print(f"wrote {args.out}: {surf.n_cells} triangles, {surf.n_points} points, volume {surf.volume:.0f} mm^3, "
           f"length {surf.bounds[5] - surf.bounds[4]:.1f} mm, parameters {par.digest()}")
     return 0

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from femstudy.errors import require
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("loads", help="thrust and torque histories of the drilling load models",
@@ -31,32 +29,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import replace
+    from femstudy.drilling.report import load_models
 
-    from femstudy.drilling import MODELS, Drill, DrillingConditions, evaluate, load_bone_set, time_grid
-    from femstudy.drilling import report
-
-    require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
-            f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
-    drill = Drill(diameter_mm=args.diameter_mm, point_angle_deg=args.point_angle)
-    if args.wall_mm is not None:
-        drill = drill.with_(wall_mm=args.wall_mm)
-    bone = load_bone_set(args.bone)
-    for name, value in (("u1_MPa", args.u1_mpa), ("u2_MPa", args.u2_mpa)):
-        if value is not None:
-            bone = replace(bone, **{name: value})
-    cond = DrillingConditions(args.feed, args.rpm, args.cortex_mm, bone, drill)
-    if not bone.in_calibrated_range(args.feed, args.rpm):
-        from femstudy.console import Console
-
-        Console.warn(f"f = {args.feed:g} mm/s, N = {args.rpm:g} rpm lies outside the conditions "
-                     f"bone set '{bone.name}' was calibrated on; its power law is extrapolated")
-    print(report.summary_text(cond, MODELS))
-    histories = [evaluate(m, cond, time_grid(cond, args.dt)) for m in MODELS]
+    study = load_models(args.feed, args.rpm, bone=args.bone, cortex_mm=args.cortex_mm, diameter_mm=args.diameter_mm,
+                        point_angle_deg=args.point_angle, wall_mm=args.wall_mm, u1_MPa=args.u1_mpa,
+                        u2_MPa=args.u2_mpa, dt_s=args.dt, bones_dir=args.settings.bones_dir, csv_path=args.csv,
+                        plot_path=args.plot)
+    print(study.text)
     if args.csv:
-        report.write_csv(args.csv, histories)
         print(f"\nwrote {args.csv}")
     if args.plot:
-        report.plot(args.plot, cond, histories)
         print(f"wrote {args.plot}")
     return 0

@@ -19,21 +19,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from femstudy import atomic
     from femstudy.casefile import load_case
-    from femstudy.console import Console
-    from femstudy.errors import require
-    from femstudy.meshing import build_femur_model
-    from femstudy.meshing.report import summary_text, write_outputs
+    from femstudy.meshing.report import summary_text
+    from femstudy.study.femur import mesh_case
 
-    require(args.mesh_size is None or args.mesh_size > 0, f"--mesh-size must be positive, got {args.mesh_size}")
-    case = load_case(args.case)
-    console = Console(quiet=args.quiet)
-    model = build_femur_model(case, console, mesh_size_mm=args.mesh_size)
+    case = load_case(args.case, args.settings.bones_dir)
     out = args.out or Path("results") / f"{case.name}-mesh"
-    console.progress(f"writing {out}")
-    with atomic.atomic_folder(out) as tmp:
-        names = write_outputs(model, tmp, screenshot=case.output.screenshot)
+    model = mesh_case(case, out, mesh_size_mm=args.mesh_size, cache_dir=args.settings.cache_dir)
     print(summary_text(model))
-    print(f"\nwrote {out}/: {', '.join(names)}")
+    print(f"\nwrote {out}/: {', '.join(model.stats['written'])}")
     return 0

@@ -1,4 +1,4 @@
-"""The ``--set KEY=VALUE`` / ``--override`` options that supply recording metadata."""
+"""The ``--set KEY=VALUE`` / ``--override`` / ``--columns`` options that say how to read recordings."""
 
 from __future__ import annotations
 
@@ -15,6 +15,10 @@ def add_metadata_options(parser: argparse.ArgumentParser, whose: str) -> None:
                         help=f"metadata for {whose}, e.g. --set spindle_rpm=1500 (TOML value)")
     parser.add_argument("--override", action="store_true",
                         help=f"let --set values win over {whose}'s header when they disagree")
+    parser.add_argument("--columns", metavar="QUANTITY=COLUMN,...",
+                        help=f"which column of {whose} is which quantity, with its unit in brackets when the "
+                             f"file has none, e.g. time=Zeit[ms],thrust=Fz,torque=Mz[N*m] (quantities: time, "
+                             f"thrust, torque, depth, fx, fy)")
 
 
 def parse_settings(items: list[str]) -> dict:

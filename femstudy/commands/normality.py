@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from femstudy.errors import UserError, require
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("normality", help="normality of F_o and p: Tables 4-2/4-3, Shapiro-Wilk, median ranks",
@@ -20,46 +18,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def read_trials(path: Path) -> tuple[list[float], list[float]]:
-    """(p, F_o) from a CSV; rows whose 'role' is outlier or validation are skipped."""
-    import csv
-
-    try:
-        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
-    rows = list(csv.DictReader(lines))
-    require(rows and {"initial_force_N", "growth_exponent_p"} <= set(rows[0]),
-            f"{path} needs columns initial_force_N and growth_exponent_p")
-    rows = [r for r in rows if r.get("role", "calibration") in ("calibration", "held out")]
-    try:
-        return [float(r["growth_exponent_p"]) for r in rows], [float(r["initial_force_N"]) for r in rows]
-    except ValueError as exc:
-        raise UserError(f"{path}: {exc}") from None
-
-
 def run(args: argparse.Namespace) -> int:
-    from femstudy.recordings.normality import appendix_b, format_normality, normality
+    from femstudy.recordings.normality import normality_study
 
-    require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
-            f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
-    if args.trials is None:
-        p, F = appendix_b()
-        source = "thesis Appendix B, Table B-1 (30 bovine trials, f = 1.5 mm/s, N = 1500 rpm)"
-        titles = ("Table 4-2: chi-square test for normality, initial cutting force F_o",
-                  "Table 4-3: chi-square test for normality, growth exponent p")
-    else:
-        p, F = read_trials(args.trials)
-        source = str(args.trials)
-        titles = ("Chi-square test for normality, initial cutting force F_o",
-                  "Chi-square test for normality, growth exponent p")
-    results = {"initial cutting force F_o [N]": normality("F_o [N]", F), "growth exponent p [-]": normality("p", p)}
-    print(f"normality of {len(F)} trials from {source}\n")
-    for title, res in zip(titles, results.values()):
-        print(format_normality(res, title) + "\n")
+    text = normality_study(args.trials, plot_path=args.plot)
+    print(text)
     if args.plot:
-        from femstudy.recordings.figures import plot_normality
-
-        plot_normality(args.plot, results)
         print(f"wrote {args.plot}")
     return 0

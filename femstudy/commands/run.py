@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from femstudy.errors import require
-
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run the drilling study of one or more case files",
@@ -18,37 +16,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--study-out", type=Path, default=Path("results/study"),
                    help="folder of the combined table when several cases run (results/study)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="override the case's mesh size [mm]")
+    p.add_argument("--force", action="store_true", help="run a study estimated to take very long")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from femstudy.casefile import load_case
-    from femstudy.console import Console
-    from femstudy.study.run import run_case
-    from femstudy.study.study import write_study
+    from femstudy.study.study import run_cases
 
-    require(args.out is None or len(args.cases) == 1, "--out names one results folder: give one case file")
-    require(args.mesh_size is None or args.mesh_size > 0, f"--mesh-size must be positive, got {args.mesh_size}")
-    from femstudy.writable import require_writable_parent
-
-    cases = [load_case(path) for path in args.cases]  # validate every file before any work
-    for case in cases:
-        require_writable_parent(args.out or Path("results") / case.name)
-    if len(cases) > 1:
-        require_writable_parent(args.study_out)
-    console = Console(quiet=args.quiet)
-    summaries = []
-    for case in cases:
-        out = args.out or Path("results") / case.name
-        summary = run_case(case, out, mesh_size_mm=args.mesh_size, console=console)
-        summaries.append(summary)
-        res = summary["results"]
-        print(f"{case.name}: max deflection {res['max_deflection_mm']['dynamic']['value']:.4g} mm dynamic / "
-              f"{res['max_deflection_mm']['static']['value']:.4g} mm static; max von Mises "
-              f"{res['max_von_mises_MPa']['dynamic']['value']:.4g} / {res['max_von_mises_MPa']['static']['value']:.4g} MPa "
-              f"({res['max_von_mises_excl_MPa']['dynamic']['value']:.4g} MPa outside the patch zone) -> {out}")
-    if len(summaries) > 1:
-        path = write_study(args.study_out, summaries)
-        print(f"combined table: {path}")
+    s = args.settings
+    results, table = run_cases(args.cases, out=args.out, study_out=args.study_out, mesh_size_mm=args.mesh_size,
+                               cache_dir=s.cache_dir, solver=s.solver, bones_dir=s.bones_dir, force=args.force)
+    for r in results:
+        d, st = r.dynamic.peaks, r.static.peaks
+        print(f"{r.case.name}: max deflection {d['max_deflection_mm'].value:.4g} mm dynamic / "
+              f"{st['max_deflection_mm'].value:.4g} mm static; max von Mises {d['max_von_mises_MPa'].value:.4g} / "
+              f"{st['max_von_mises_MPa'].value:.4g} MPa ({d['max_von_mises_excl_MPa'].value:.4g} MPa outside the "
+              f"exclusion zone) -> {r.out_dir}")
+    if table is not None:
+        print(f"combined table: {table}")
     return 0

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 from pathlib import Path
 
 FIELDS = {"von_mises": "von_mises_MPa", "displacement": "displacement_magnitude_mm", "region": "region"}
@@ -25,9 +27,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
+def has_display() -> bool:
+    """True when an interactive window can be opened."""
+    return sys.platform in ("win32", "darwin") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
 def run(args: argparse.Namespace) -> int:
     from femstudy.study.viewer import view
 
-    view(args.results, loading=args.loading, time_s=args.time, field=FIELDS[args.field],
-         warp=args.warp, screenshot=args.screenshot)
+    written = view(args.results, loading=args.loading, time_s=args.time, field=FIELDS[args.field],
+                   warp=args.warp, screenshot=args.screenshot, interactive=has_display())
+    if written is not None:
+        print(f"wrote {written}")
     return 0

@@ -26,6 +26,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -39,15 +40,39 @@ from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection, sele
 from femstudy.diagnosis.verdict import Verdict, decide
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
-from femstudy.recordings.reader import Recording
+from femstudy.recordings.reader import Recording, read_recording
 
 logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """Everything ``femstudy diagnose`` reports; :meth:`to_json` is the JSON contract
-    (docs/diagnosis.md)."""
+    """The result of :func:`diagnose`: everything ``femstudy diagnose`` reports.
+
+    :meth:`to_json` is the JSON contract (docs/diagnosis.md), :meth:`summary` the printed
+    text and :meth:`write` the files. Times are on the recording's clock [s], loads in N and N·mm.
+
+    Attributes
+    ----------
+    recording : the recording diagnosed (:class:`~femstudy.recordings.Recording`).
+    problem : the fitted problem: analysis band, channels, noise model, aligned simulation.
+    baseline : the simulation as given, aligned (clock shift, tares): the "before" fit.
+    fits : every fitted subset of the catalogue, by frozenset of mechanism names.
+    selection : the model selection (BIC table, inclusion probabilities, what was dropped).
+    verdict : the named subset, its fit, the shapes left unexplained, the confidences.
+    mismatch : intervals where the aligned simulation departs from the recording beyond noise
+        (dicts: start_s, end_s, channel, significance, max_abs_z).
+    mechanisms : the named mechanisms (dicts: mechanism, confidence, parameters,
+        explanation, evidence).
+    unexplained : what the best catalogue model leaves, characterised (dicts: start_s, end_s,
+        channel, kind, description, evidence).
+    fit_summary : per channel, R² (in sample and held out) and RMSE before and after.
+    noise_models : per channel, the fitted :class:`~femstudy.diagnosis.noise.NoiseSpectrum`.
+    timing : the simulation's events on the recording's clock, and the cortex [mm].
+    simulation_label : what the recording was compared with.
+    seconds : wall-clock time of the diagnosis [s].
+    notes : how inputs were read or estimated (one sentence each).
+    """
 
     recording: Recording
     problem: Problem
@@ -56,14 +81,43 @@ class Diagnosis:
     selection: Selection
     verdict: Verdict
     mismatch: list
-    mechanisms: list             # dicts: mechanism, confidence, parameters, explanation, evidence
-    unexplained: list            # dicts: start_s, end_s, channel, kind, description, evidence
-    fit_summary: dict            # per channel: baseline/improved r2, r2_heldout, rmse, window_s
-    noise_models: dict           # channel -> noise.NoiseSpectrum
-    timing: dict                 # the simulation's events on the recording's clock, cortex
+    mechanisms: list
+    unexplained: list
+    fit_summary: dict
+    noise_models: dict
+    timing: dict
     simulation_label: str
     seconds: float
     notes: tuple = ()
+
+    def summary(self) -> str:
+        """The printed summary (inputs, noise, timing, mechanisms, unexplained, fit, residual test)."""
+        from femstudy.diagnosis import report
+
+        return report.summary_text(self)
+
+    def write(self, json_path=None, plot_path=None, report_dir=None) -> list[Path]:
+        """Write the JSON contract, the overlay/residual figure and the report folder (report.md,
+        overlay.png, residuals.png, diagnosis.json), each atomically; returns what was written.
+
+        Example
+        -------
+        >>> d.write(json_path="d.json", report_dir="report")  # doctest: +SKIP
+        [PosixPath('d.json'), PosixPath('report/report.md')]
+        """
+        from femstudy.diagnosis import report
+
+        written = []
+        if json_path is not None:
+            report.write_json(json_path, self)
+            written.append(Path(json_path))
+        if plot_path is not None:
+            report.plot(plot_path, self)
+            written.append(Path(plot_path))
+        if report_dir is not None:
+            report.write_report(report_dir, self, self.summary())
+            written.append(Path(report_dir) / "report.md")
+        return written
 
     @property
     def improved(self) -> Fit:
@@ -197,21 +251,25 @@ def _timing(problem: Problem, baseline: Fit, cortex_mm: float) -> dict:
     return out
 
 
-def diagnose(recording: Recording, simulation=None, cortex_mm: float | None = None,
-             bone: str | BoneSet = "bovine", progress=None, *, model: str | None = None) -> Diagnosis:
+def diagnose(recording, simulation=None, cortex_mm: float | None = None,
+             bone: str | BoneSet = "bovine", progress=None, *, model: str | None = None,
+             columns=None, overrides: dict | None = None, override_header: bool = False,
+             bone_library: Path | None = None) -> Diagnosis:
     """Diagnose ``recording`` against a simulation (see the module docstring).
 
     Parameters
     ----------
-    recording : the recording (:func:`femstudy.recordings.read_recording`).
+    recording : a :class:`~femstudy.recordings.Recording`, or the path of a recording file
+        (any format :func:`femstudy.recordings.read_recording` reads, with ``columns``,
+        ``overrides`` and ``override_header`` passed to it).
     simulation : a simulated trace — a path in the recording format, a
         :class:`~femstudy.recordings.Recording`, or a :class:`.TraceSimulation` — or a
         :class:`.ModelSimulation`; None with ``model``.
     cortex_mm : cortical thickness [mm]; default: the recording's header ``cortex_mm``, else
         the simulation's breakthrough, else (no breakthrough) the depth reached, with a note.
-    bone : bone set giving μ_w for the friction reading of chip clogging without torque, and
-        the friction of a load model.
-    progress : optional callable taking one message per step.
+    bone : bone set (or its name, resolved in ``bone_library``) giving μ_w for the friction
+        reading of chip clogging without torque, and the friction of a load model.
+    progress : optional callable taking one message per step (they also go to the logger).
     model : "allotta" or "clogging": diagnose against that femstudy load model instead, started
         at the recording's detected contact.
 
@@ -221,18 +279,23 @@ def diagnose(recording: Recording, simulation=None, cortex_mm: float | None = No
 
     Example
     -------
-    >>> d = diagnose(read_recording("rec.csv"), "sim.csv")          # doctest: +SKIP
+    >>> d = diagnose("rec.csv", "sim.csv")                           # doctest: +SKIP
     >>> d.to_json()["missing_physics"], d.to_json()["unexplained"]   # doctest: +SKIP
     """
     start = time.perf_counter()
 
     def say(message: str) -> None:
-        logger.debug(message)
+        logger.info(message)
         if progress:
             progress(message)
 
-    bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
+    if isinstance(recording, (str, os.PathLike)):
+        recording = read_recording(recording, overrides, override_header=override_header, columns=columns)
+        for note in recording.notes:
+            say(note)
+    bone_set = load_bone_set(bone, bone_library) if isinstance(bone, str) else bone
     sim, cortex, label, notes = _simulation(recording, simulation, model, cortex_mm, bone_set)
+    say(f"read {recording.name} ({recording.time_s.size} samples) and the simulation ({label})")
     problem, more = build_problem(recording, sim, cortex)
     notes = notes + more
     baseline = align(problem)
@@ -274,6 +337,7 @@ def diagnose(recording: Recording, simulation=None, cortex_mm: float | None = No
     bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
     mechanisms = explain.mechanisms(problem, improved, selection, verdict, bone_mu_w)
     summary = summarise_fit(problem, baseline, improved)
+    seconds = time.perf_counter() - start
+    say(f"diagnosed in {seconds:.2f} s")
     return Diagnosis(recording, problem, baseline, fits, selection, verdict, mismatch, mechanisms, unexplained,
-                     summary, noise_models, _timing(problem, baseline, cortex), label,
-                     time.perf_counter() - start, tuple(notes))
+                     summary, noise_models, _timing(problem, baseline, cortex), label, seconds, tuple(notes))

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from femstudy import thesis
 from femstudy.errors import require
 
 #: l_w [mm] from Appendix B's mean growth exponent (p = 0.469324 at f = 1.5 mm/s,
@@ -31,10 +32,11 @@ class Drill:
     flute_area_mm2 : S, flute cross-section (Eq A.2).
     face_angle_deg : θ, angle between flute face and the plane across the flute (Eq A.3).
     eta : η, ratio of lateral to axial chip pressure (≈ Poisson ratio of cortical bone).
+    flutes : number of flutes (cutting lips), 2 for a twist drill.
     """
 
-    diameter_mm: float = 2.7
-    point_angle_deg: float = 90.0
+    diameter_mm: float = thesis.DRILL_DIAMETER_MM
+    point_angle_deg: float = thesis.DRILL_POINT_ANGLE_DEG
     face_mm: float = 1.16
     heel_mm: float = 1.16
     root_mm: float = 0.29
@@ -42,6 +44,7 @@ class Drill:
     flute_area_mm2: float = 1.46
     face_angle_deg: float = 26.7
     eta: float = 0.4
+    flutes: int = 2
 
     def __post_init__(self) -> None:
         require(math.isfinite(self.diameter_mm) and self.diameter_mm > 0,
@@ -56,6 +59,7 @@ class Drill:
         require(0 < self.face_angle_deg < 90,
                 f"drill face_angle_deg must lie in (0, 90), got {self.face_angle_deg}")
         require(0 < self.eta <= 1, f"drill eta must lie in (0, 1], got {self.eta}")
+        require(self.flutes >= 1, f"a drill has at least one flute, got {self.flutes}")
 
     @property
     def radius_mm(self) -> float:
@@ -76,6 +80,10 @@ class Drill:
     def flute_length_sum_mm(self) -> float:
         """l_f + l_h + l_r [mm], the flute contact lengths that carry μ_f alone."""
         return self.face_mm + self.heel_mm + self.root_mm
+
+    def flute_passing_hz(self, spindle_rpm: float) -> float:
+        """Frequency at which cutting lips pass a point of the hole bottom: flutes · N/60 [Hz]."""
+        return self.flutes * spindle_rpm / 60.0
 
     def with_(self, **changes) -> "Drill":
         """A copy with some fields changed (validated again)."""

@@ -10,35 +10,34 @@ A *bone set* is a per-condition friction table plus the specific cutting energie
 cortical and cancellous bone; its power-law coefficients are always computed from the
 table by :func:`fit_power_law`. The built-in sets "bovine" and "human" come from the
 thesis's Tables 5-1 and 5-11 (package data). Calibrated sets are TOML files named
-``<name>.toml`` in :func:`bone_library` (written by ``femstudy calibrate``).
+``<name>.toml`` in a bone library folder (written by ``femstudy calibrate``;
+:func:`default_bone_library` unless one is given).
 """
 
 from __future__ import annotations
 
 import csv
 import json
-import os
-import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
+from femstudy import thesis
 from femstudy.errors import UserError, require
+from femstudy.schema import parse_toml
 
-#: Cortical specific cutting energy u1 [MPa]: the Allotta full-engagement thrust
-#: a sin(β/2) tan(β/2) u1 l equated to the mean initial force of Appendix B
-#: (F_o = 25.686 N at f = 1.5 mm/s, N = 1500 rpm, a = 0.06 mm/rev, 2.7 mm 90° drill).
-CORTICAL_SPECIFIC_ENERGY_MPA = 448.5
-#: Cancellous specific cutting energy u2 [MPa]: u1 scaled by the ratio of cancellous
-#: ultimate strength (Table 2-5 mean, 7.56 MPa) to cortical longitudinal tensile
-#: strength (Table 2-4, 133 MPa). The thesis gives no value; see docs/load-models.md.
-CANCELLOUS_SPECIFIC_ENERGY_MPA = round(CORTICAL_SPECIFIC_ENERGY_MPA * 7.56 / 133, 1)
+#: Specific cutting energies u1 (cortical) and u2 (cancellous) [MPa]: derived values, the
+#: thesis gives none (femstudy.thesis, docs/load-models.md).
+CORTICAL_SPECIFIC_ENERGY_MPA = thesis.CORTICAL_SPECIFIC_ENERGY_MPA
+CANCELLOUS_SPECIFIC_ENERGY_MPA = thesis.CANCELLOUS_SPECIFIC_ENERGY_MPA
 
 BUILTIN_TABLES = {
     "bovine": ("table_5_1_bovine_friction.csv", "thesis Table 5-1, bovine femur"),
     "human": ("table_5_11_human_friction.csv", "thesis Table 5-11, human femur"),
+    "human-printed": ("table_5_12_human_printed.csv", "thesis Table 5-12 / Eqs 5.8-5.9 as printed, human femur"),
 }
 
 
@@ -127,39 +126,61 @@ def builtin_bone_set(name: str) -> BoneSet:
                       for k in ("feed_mm_s", "spindle_rpm", "mu_f", "mu_w")})
 
 
-def bone_library() -> Path:
-    """Folder of calibrated sets: $FEMSTUDY_BONES, else $XDG_DATA_HOME/femstudy/bones."""
-    if "FEMSTUDY_BONES" in os.environ:
-        return Path(os.environ["FEMSTUDY_BONES"])
-    data_home = os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share"
-    return Path(data_home) / "femstudy" / "bones"
+def default_bone_library() -> Path:
+    """The user's folder of calibrated sets: femstudy/bones in the platform's user data folder
+    (``~/.local/share/femstudy/bones`` on Linux, following ``$XDG_DATA_HOME``)."""
+    import platformdirs
+
+    return platformdirs.user_data_path("femstudy") / "bones"
+
+
+class ConditionRow(BaseModel):
+    """One calibrated condition of a bone-set file: feed [mm/s], speed [rpm], μ_f, μ_w."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    feed_mm_s: float = Field(gt=0, allow_inf_nan=False)
+    spindle_rpm: float = Field(gt=0, allow_inf_nan=False)
+    mu_f: float = Field(gt=0, allow_inf_nan=False)
+    mu_w: float = Field(gt=0, allow_inf_nan=False)
+
+
+class BoneSetFile(BaseModel):
+    """A bone-set TOML file as :meth:`BoneSet.to_toml` writes it; ``a`` and ``b`` (the power
+    law) are informative and recomputed from the conditions."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    name: str | None = None
+    source: str | None = None
+    u1_MPa: float = Field(CORTICAL_SPECIFIC_ENERGY_MPA, gt=0, allow_inf_nan=False)
+    u2_MPa: float = Field(CANCELLOUS_SPECIFIC_ENERGY_MPA, ge=0, allow_inf_nan=False)
+    a: list[float] = []
+    b: list[float] = []
+    condition: list[ConditionRow] = Field(min_length=4)
 
 
 def read_bone_set_file(path: Path) -> BoneSet:
-    """Read a bone-set TOML file written by :meth:`BoneSet.to_toml`."""
+    """Read a bone-set TOML file written by :meth:`BoneSet.to_toml` (schema :class:`BoneSetFile`)."""
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"cannot read bone set {path}: {exc}") from None
-    try:
-        conditions = doc["condition"]
-        return BoneSet(name=str(doc.get("name", path.stem)), source=str(doc.get("source", path)),
-                       u1_MPa=float(doc.get("u1_MPa", CORTICAL_SPECIFIC_ENERGY_MPA)),
-                       u2_MPa=float(doc.get("u2_MPa", CANCELLOUS_SPECIFIC_ENERGY_MPA)),
-                       **{k: tuple(float(c[k]) for c in conditions)
-                          for k in ("feed_mm_s", "spindle_rpm", "mu_f", "mu_w")})
-    except (KeyError, TypeError, ValueError) as exc:
-        raise UserError(f"bone set {path} is missing or has a bad entry: {exc}") from None
+    doc = parse_toml(text, BoneSetFile, f"bone set {path}")
+    return BoneSet(name=doc.name or Path(path).stem, source=doc.source or str(path), u1_MPa=doc.u1_MPa,
+                   u2_MPa=doc.u2_MPa, **{k: tuple(getattr(c, k) for c in doc.condition)
+                                         for k in ("feed_mm_s", "spindle_rpm", "mu_f", "mu_w")})
 
 
-def load_bone_set(name: str) -> BoneSet:
-    """Resolve a bone-set name: built-in, a path to a .toml file, or a calibrated set."""
+def load_bone_set(name: str, library: Path | None = None) -> BoneSet:
+    """Resolve a bone-set name: built-in, a path to a .toml file, or a calibrated set in
+    ``library`` (default :func:`default_bone_library`)."""
     if name in BUILTIN_TABLES:
         return builtin_bone_set(name)
     path = Path(name)
     if path.suffix == ".toml" and path.is_file():
         return read_bone_set_file(path)
-    library = bone_library()
+    library = default_bone_library() if library is None else Path(library)
     candidate = library / f"{name}.toml"
     if candidate.is_file():
         return read_bone_set_file(candidate)
@@ -167,4 +188,3 @@ def load_bone_set(name: str) -> BoneSet:
     known = ", ".join(list(BUILTIN_TABLES) + calibrated)
     raise UserError(f"unknown bone coefficient set '{name}': choose one of {known}, "
                     f"or a calibrated set (femstudy calibrate --name {name})")
-

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from femstudy import thesis
 from femstudy.drilling import allotta, clogging, literature
 from femstudy.drilling.drill import Drill, feed_per_revolution
 from femstudy.drilling.friction import BoneSet, builtin_bone_set
@@ -38,12 +39,10 @@ MODEL_TITLES = {
     "peng": "Peng simplified (Eqs 2.20-2.21)",
 }
 
-#: Material densities [g/cm³] of Table 3-1, used by Chi's density-based thrust.
-CORTICAL_DENSITY_G_CM3 = 1.70
-CANCELLOUS_DENSITY_G_CM3 = 0.32
-#: Cortical ultimate tensile strength [MPa], Table 2-4 (longitudinal), Peng's R_a.
-CORTICAL_TENSILE_STRENGTH_MPA = 133.0
-CANCELLOUS_STRENGTH_MPA = 7.56
+#: Peng's material strength R_a [MPa]: Table 2-4's longitudinal tensile strength for the
+#: cortex and Table 2-5's mean for cancellous bone.
+CORTICAL_TENSILE_STRENGTH_MPA = thesis.CORTICAL_STRENGTH_MPA["longitudinal_tension_ultimate"]
+CANCELLOUS_STRENGTH_MPA = thesis.CANCELLOUS_STRENGTH_MPA["mean"]
 
 
 @dataclass(frozen=True)
@@ -97,6 +96,26 @@ class DrillingConditions:
 
 
 @dataclass(frozen=True)
+class DynamicContent:
+    """What a resolved transient adds to the loads' slow growth (docs/load-models.md).
+
+    flute_oscillation : relative amplitude A of the per-flute oscillation: thrust and torque
+                        times (1 + A sin 2π f_fp t), f_fp = flutes · N/60 (50 Hz at 1500 rpm)
+    release_s         : the chip-evacuation load released at breakthrough linearly over this
+                        time [s] (the chips escape through the exit hole) instead of fading with
+                        the cone's share of cortex; None keeps the fade
+    """
+
+    flute_oscillation: float = 0.0
+    release_s: float | None = None
+
+    def __post_init__(self) -> None:
+        require(0 <= self.flute_oscillation < 1, f"flute oscillation amplitude must lie in [0, 1), "
+                                                 f"got {self.flute_oscillation}")
+        require(self.release_s is None or self.release_s > 0, f"release time must be positive, got {self.release_s}")
+
+
+@dataclass(frozen=True)
 class LoadHistory:
     """Thrust [N] and torque [N·mm] (NaN where a model has none) against time [s] and depth [mm]."""
 
@@ -107,8 +126,9 @@ class LoadHistory:
     torque_Nmm: np.ndarray
 
 
-def evaluate(model: str, cond: DrillingConditions, time_s) -> LoadHistory:
-    """Evaluate one load model at the given times [s] after contact (vectorised)."""
+def evaluate(model: str, cond: DrillingConditions, time_s, content: DynamicContent = DynamicContent()) -> LoadHistory:
+    """Evaluate one load model at the given times [s] after contact (vectorised); ``content``
+    adds the per-flute oscillation and the breakthrough release (model "clogging" only)."""
     require(model in MODELS, f"unknown load model '{model}': choose one of {', '.join(MODELS)}")
     t = np.asarray(time_s, dtype=float)
     d = np.maximum(cond.feed_mm_s * t, 0.0)
@@ -124,12 +144,17 @@ def evaluate(model: str, cond: DrillingConditions, time_s) -> LoadHistory:
             l = drill.cone_length_mm
             z = np.maximum((np.minimum(d, h) - l) / drill.diameter_mm, 0.0)
             cone_in_cortex = np.clip(np.minimum(d, h) - np.maximum(d - l, 0.0), 0.0, l) / l
+            if content.release_s is not None:  # released within release_s of breakthrough (t = h/f)
+                cone_in_cortex = np.clip(1 - (t - h / cond.feed_mm_s) / content.release_s, 0.0, 1.0) * (d > 0)
             F = F + (clogging.thrust(z, F0, mu_f, mu_w, drill) - F0) * cone_in_cortex
             T = T + clogging.torque(z, F0, mu_f, mu_w, drill) * cone_in_cortex
+            if content.flute_oscillation:
+                wave = 1 + content.flute_oscillation * np.sin(2 * np.pi * drill.flute_passing_hz(cond.spindle_rpm) * t)
+                F, T = F * wave, T * wave
     elif model == "chi":
-        F = (in_cortex * literature.chi_thrust(cond.feed_mm_s, cond.spindle_rpm, CORTICAL_DENSITY_G_CM3)
+        F = (in_cortex * literature.chi_thrust(cond.feed_mm_s, cond.spindle_rpm, thesis.CORTICAL_DENSITY_G_CM3)
              + in_cancellous * literature.chi_thrust(cond.feed_mm_s, cond.spindle_rpm,
-                                                     CANCELLOUS_DENSITY_G_CM3))
+                                                     thesis.CANCELLOUS_DENSITY_G_CM3))
         T = np.full_like(d, np.nan)
     else:  # peng
         F = (in_cortex * literature.peng_thrust(a, bone.u1_MPa, drill)

@@ -4,11 +4,15 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
+from dataclasses import dataclass
 
 import numpy as np
 
 from femstudy import atomic
 from femstudy.drilling.history import MODEL_TITLES, DrillingConditions, LoadHistory, evaluate
+
+log = logging.getLogger(__name__)
 
 CSV_COLUMNS = ["model", "time_s", "depth_mm", "thrust_N", "torque_Nmm"]
 MODEL_COLOURS = {"allotta": "tab:blue", "clogging": "tab:orange", "chi": "tab:green", "peng": "tab:red"}
@@ -96,3 +100,76 @@ def plot(path, cond: DrillingConditions, histories: list[LoadHistory]) -> None:
     with atomic.atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=130, format=str(path).rsplit(".", 1)[-1].lower())
     plt.close(fig)
+
+
+@dataclass(frozen=True)
+class LoadStudy:
+    """Every load model for one unicortical hole: the operating point, the key values and the
+    histories (:class:`~femstudy.drilling.history.LoadHistory`, one per model)."""
+
+    conditions: DrillingConditions
+    histories: list
+    text: str
+
+    def rows(self) -> list[dict]:
+        """One dict per model and time: model, time_s, depth_mm, thrust_N, torque_Nmm."""
+        return [{"model": h.model, "time_s": float(t), "depth_mm": float(d), "thrust_N": float(f),
+                 "torque_Nmm": float(m)} for h in self.histories
+                for t, d, f, m in zip(h.time_s, h.depth_mm, h.thrust_N, h.torque_Nmm)]
+
+
+def load_models(feed_mm_s: float, spindle_rpm: float, *, bone: str = "bovine", cortex_mm: float = 6.0,
+                diameter_mm: float = 2.7, point_angle_deg: float = 90.0, wall_mm: float | None = None,
+                u1_MPa: float | None = None, u2_MPa: float | None = None, dt_s: float = 0.01,
+                bones_dir=None, csv_path=None, plot_path=None) -> LoadStudy:
+    """Evaluate the Allotta, chip-clogging, Chi and Peng models at one operating point.
+
+    Parameters
+    ----------
+    feed_mm_s, spindle_rpm : float
+        Feed f [mm/s] and spindle speed N [rpm].
+    bone : str
+        Coefficient set: "bovine", "human", a calibrated set's name or a .toml file.
+    cortex_mm, diameter_mm, point_angle_deg, wall_mm
+        Cortical thickness [mm], drill diameter [mm], point angle [deg], wall contact length [mm].
+    u1_MPa, u2_MPa : float, optional
+        Specific cutting energies replacing the bone set's [MPa].
+    dt_s : float
+        Time step of the histories [s].
+    csv_path, plot_path : path-like, optional
+        Write the histories (CSV_COLUMNS) and a figure.
+
+    Returns
+    -------
+    LoadStudy
+
+    Examples
+    --------
+    >>> study = load_models(2.0, 1500.0)
+    >>> round(float(study.histories[1].thrust_N.max()), 1)   # clogging, at breakthrough
+    80.8
+    """
+    from dataclasses import replace
+
+    from femstudy.drilling import MODELS, Drill, load_bone_set, time_grid
+    from femstudy.errors import require
+
+    require(plot_path is None or str(plot_path).lower().endswith((".png", ".pdf", ".svg")),
+            f"--plot must end in .png, .pdf or .svg, got '{plot_path}'")
+    drill = Drill(diameter_mm=diameter_mm, point_angle_deg=point_angle_deg)
+    if wall_mm is not None:
+        drill = drill.with_(wall_mm=wall_mm)
+    bone_set = load_bone_set(bone, bones_dir)
+    for name, value in (("u1_MPa", u1_MPa), ("u2_MPa", u2_MPa)):
+        if value is not None:
+            bone_set = replace(bone_set, **{name: value})
+    cond = DrillingConditions(feed_mm_s, spindle_rpm, cortex_mm, bone_set, drill)
+    if not bone_set.in_calibrated_range(feed_mm_s, spindle_rpm):
+        log.warning("f = %g mm/s, N = %g rpm lies outside the conditions bone set '%s' was calibrated on; its "
+                    "power law is extrapolated", feed_mm_s, spindle_rpm, bone_set.name)
+    histories = [evaluate(m, cond, time_grid(cond, dt_s)) for m in MODELS]
+    if csv_path:
+        write_csv(csv_path, histories)
+    if plot_path:
+        plot(plot_path, cond, histories)
+    return LoadStudy(cond, histories, summary_text(cond, MODELS))

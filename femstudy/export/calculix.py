@@ -285,9 +285,9 @@ def run_ccx(inp: str | os.PathLike, threads: int = 2, timeout: float | None = No
     if ccx is None:
         raise UserError("ccx (CalculiX) is not on PATH; install it with bench/peers/setup.sh")
     inp = Path(inp)
-    env = {**os.environ, "OMP_NUM_THREADS": str(threads), "CCX_NPROC_EQUATION_SOLVER": str(threads)}
-    proc = subprocess.run([ccx, "-i", inp.stem], cwd=inp.parent, env=env, capture_output=True,
-                          text=True, timeout=timeout)
+    # ccx takes its thread counts from its environment: set them for it alone, through env(1)
+    command = ["env", f"OMP_NUM_THREADS={threads}", f"CCX_NPROC_EQUATION_SOLVER={threads}", ccx, "-i", inp.stem]
+    proc = subprocess.run(command, cwd=inp.parent, capture_output=True, text=True, timeout=timeout)
     errors = [line for line in proc.stdout.splitlines() if "*ERROR" in line]
     if proc.returncode != 0 or errors:
         raise RuntimeError(f"ccx failed on {inp} (exit {proc.returncode}): "

@@ -14,6 +14,7 @@ M are assembled as 3×3-block sparse matrices over the nodes' sparsity pattern.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -25,6 +26,9 @@ from skfem.quadrature import get_quadrature
 from femstudy.errors import require
 from femstudy.fe.materials import ElementMaterials, element_materials
 from femstudy.femur_model import TetMesh
+from femstudy.materials import BoneMaterials
+
+log = logging.getLogger(__name__)
 
 #: Elements per batch: bounds the temporary arrays to a few hundred MB at any mesh size.
 CHUNK = 20_000
@@ -62,10 +66,10 @@ def reference(order: int) -> Reference:
     return Reference(order, element, X, W, grad, (N * Wm) @ N.T)
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class FESystem:
     """An assembled elasticity model; build it with :func:`assemble`, reuse it for every load
-    (it pickles, without its cache, for reuse across runs).
+    and constraint set (:func:`femstudy.fe.factorize` factorises it for one set of clamps).
 
     mesh         : scikit-fem MeshTet of the used vertices [mm]
     nodes        : (n_nodes, 3) node coordinates [mm] (vertices, then P2 edge mid-points)
@@ -77,7 +81,6 @@ class FESystem:
                    ``M_nodes @ u.reshape(-1, 3)`` with a ninth of the entries
     point_index  : for every point of the input TetMesh, its mesh vertex (−1 if unused)
     timings      : wall times [s] of the assembly phases
-    cache        : factorisations and reduced matrices, keyed by constraint set
     """
 
     mesh: skfem.MeshTet
@@ -90,9 +93,8 @@ class FESystem:
     K: sp.csr_matrix
     M: sp.csr_matrix
     point_index: np.ndarray
-    M_nodes: sp.csr_matrix | None = None
+    M_nodes: sp.csr_matrix
     timings: dict = field(default_factory=dict)
-    cache: dict = field(default_factory=dict, repr=False)
 
     @property
     def order(self) -> int:
@@ -105,10 +107,6 @@ class FESystem:
     @property
     def n_tets(self) -> int:
         return len(self.cells)
-
-    def __getstate__(self):
-        """Pickle without the cache (factorisations live in solver libraries' memory)."""
-        return {**self.__dict__, "cache": {}}
 
     def summary(self) -> str:
         t = self.timings
@@ -127,11 +125,11 @@ def jacobians(points: np.ndarray, tets: np.ndarray):
     return np.linalg.inv(J), det
 
 
-def strain_matrices(system: FESystem, cells: np.ndarray):
+def strain_matrices(mesh: skfem.MeshTet, ref: Reference, cells: np.ndarray):
     """B (n, nq, 6, 3 nbf) with ε = B u_e (Voigt, engineering shear) at the stiffness
-    quadrature points, and the integration weights dV (n, nq) [mm³], for elements ``cells``."""
-    ref = system.ref
-    invJ, det = jacobians(system.mesh.p.T, system.mesh.t.T[cells])
+    quadrature points of ``ref``, and the integration weights dV (n, nq) [mm³], for elements
+    ``cells`` of ``mesh``."""
+    invJ, det = jacobians(mesh.p.T, mesh.t.T[cells])
     G = np.einsum("qak,ekj->eqaj", ref.grad, invJ)  # ∂N_a/∂x_j = Σ_k ∂N_a/∂ξ_k (J⁻¹)_kj
     n, nq, nbf = G.shape[:3]
     B = np.zeros((n, nq, 6, nbf, 3))
@@ -178,17 +176,34 @@ def _block_matrix(blocks: np.ndarray, indptr, indices, n_nodes: int) -> sp.csr_m
     return sp.bsr_matrix((blocks, indices, indptr), shape=(3 * n_nodes, 3 * n_nodes)).tocsr()
 
 
-def assemble(mesh: TetMesh, materials=None, order: int = 2, long_axis=None, console=None) -> FESystem:
-    """Assemble K and M for a region-marked :class:`~femstudy.femur_model.TetMesh`.
+def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int = 2,
+             long_axis=None) -> FESystem:
+    """Assemble the stiffness K [N/mm] and consistent mass M [tonne] of a region-marked mesh.
 
-    materials : :class:`femstudy.casefile.MaterialsSpec` (default: thesis Table 3-1)
-    order     : 2 for quadratic (10-node) tetrahedra, 1 for linear ones
-    long_axis : the bone's long axis for a transversely isotropic cortex: a 3-vector, one
-                per tet, or None for the principal axis of the mesh points (largest spread)
+    Parameters
+    ----------
+    mesh : TetMesh
+        Points [mm], tetrahedra and region codes (:mod:`femstudy.femur_model`).
+    materials : BoneMaterials, optional
+        Cortical and cancellous materials; default thesis Table 3-1.
+    order : {2, 1}
+        Quadratic (10-node) or linear tetrahedra.
+    long_axis : array_like, optional
+        The bone's long axis for a transversely isotropic cortex: a 3-vector, one per tet,
+        or None for the principal axis of the mesh points (largest spread).
+
+    Returns
+    -------
+    FESystem
+
+    Examples
+    --------
+    >>> from femstudy.fe.geometry import tube_mesh
+    >>> system = assemble(tube_mesh(100.0, 14.0, 6.5, 1, 12, 10), order=1)
+    >>> system.n_dofs
+    720
     """
-    from femstudy.casefile import MaterialsSpec
-
-    materials = MaterialsSpec() if materials is None else materials
+    materials = BoneMaterials() if materials is None else materials
     t0 = time.perf_counter()
     points, tets = np.asarray(mesh.points, float), np.asarray(mesh.tets)
     require(points.ndim == 2 and points.shape[1] == 3 and tets.ndim == 2 and tets.shape[1] == 4 and len(tets),
@@ -210,14 +225,13 @@ def assemble(mesh: TetMesh, materials=None, order: int = 2, long_axis=None, cons
     t1 = time.perf_counter()
     indptr, indices, position = _node_pattern(cells, n_nodes)
     t2 = time.perf_counter()
-    system = FESystem(skmesh, ref, dofs, nodes, cells, np.asarray(mesh.region), mats, None, None, point_index)
 
     nbf, nnzb = ref.nbf, len(indices)
     blocks, nodal_mass = np.zeros((nnzb, 9)), np.zeros(nnzb)
     for start in range(0, len(cells), CHUNK):
         part = np.arange(start, min(start + CHUNK, len(cells)))
         n, pairs = len(part), len(part) * nbf * nbf
-        B, dV = strain_matrices(system, part)
+        B, dV = strain_matrices(skmesh, ref, part)
         DB = _stress_matrices(B, mats.D, mats.index[part]) * dV[..., None, None]
         Ke = B.reshape(n, -1, 3 * nbf).transpose(0, 2, 1) @ DB.reshape(n, -1, 3 * nbf)  # rows (a, c), cols (b, d)
         Me = (mats.density[part] * 6 * dV.sum(axis=1))[:, None, None] * ref.mass  # 6 ΣdV = |det J|
@@ -232,9 +246,9 @@ def assemble(mesh: TetMesh, materials=None, order: int = 2, long_axis=None, cons
     M_nodes = sp.csr_matrix((nodal_mass, indices, indptr), shape=(n_nodes, n_nodes))
     M = _block_matrix(nodal_mass[:, None, None] * np.eye(3), indptr, indices, n_nodes)
     t4 = time.perf_counter()
-    system.K, system.M, system.M_nodes = K, M, M_nodes
-    system.timings = {"setup_s": t1 - t0, "pattern_s": t2 - t1, "elements_s": t3 - t2, "matrices_s": t4 - t3,
-                      "total_s": t4 - t0}
-    if console is not None:
-        console.progress(f"assembled {system.summary()}")
+    timings = {"setup_s": t1 - t0, "pattern_s": t2 - t1, "elements_s": t3 - t2, "matrices_s": t4 - t3,
+               "total_s": t4 - t0}
+    system = FESystem(skmesh, ref, dofs, nodes, cells, np.asarray(mesh.region), mats, K, M, point_index,
+                      M_nodes, timings)
+    log.info("assembled %s", system.summary())
     return system

@@ -13,14 +13,14 @@ number of right-hand sides; the transient and modal analyses rely on that.
 
 ``method="auto"`` takes PARDISO when it is importable and its own memory estimate (from the
 symbolic analysis) fits in the available memory, then CHOLMOD, then SuperLU below
-:data:`SUPERLU_MAX_DOFS`, and AMG-CG otherwise, or when PARDISO's estimate does not fit. The environment variable
-``FEMSTUDY_SOLVER`` overrides the choice. Timings behind these rules: docs/solver.md.
+:data:`SUPERLU_MAX_DOFS`, and AMG-CG otherwise, or when PARDISO's estimate does not fit.
+Timings behind these rules: docs/solver.md.
 """
 
 from __future__ import annotations
 
 import importlib.util
-import os
+import logging
 import time
 import warnings
 
@@ -28,6 +28,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from femstudy.errors import UserError, require
+
+log = logging.getLogger(__name__)
 
 METHODS = ("pardiso", "cholmod", "superlu", "amg")
 #: The pure-scipy fallback's switch from SuperLU to AMG-CG. On the femur SuperLU took 11 s
@@ -52,6 +54,15 @@ def available() -> list[str]:
     packages = {"pardiso": "pypardiso", "cholmod": "sksparse.cholmod", "superlu": "scipy.sparse.linalg",
                 "amg": "pyamg"}
     return [m for m in METHODS if _installed(packages[m])]
+
+
+def load_runtimes() -> None:
+    """Load the runtime libraries of the installed direct solvers (MKL for PARDISO), so that a
+    thread limit set now (threadpoolctl) reaches them too."""
+    if "pardiso" in available():
+        import pypardiso
+
+        pypardiso.PyPardisoSolver()
 
 
 def available_memory_bytes() -> int:
@@ -94,22 +105,6 @@ class Factor:
         return f"{self.method}: {self.n:,} unknowns, set-up {self.setup_s:.2f} s{per}"
 
 
-def _name_mkl_library() -> None:
-    """Tell pypardiso where MKL's runtime library is (its documented ``PYPARDISO_MKL_RT``),
-    read from the ``mkl`` package's file list; otherwise pypardiso walks the whole environment
-    for it, 0.2 s for every solver object it makes (two per process)."""
-    if "PYPARDISO_MKL_RT" in os.environ:
-        return
-    from importlib.metadata import PackageNotFoundError, files
-    try:
-        found = [f.locate() for f in files("mkl") or () if f.name.startswith("libmkl_rt")]
-    except PackageNotFoundError:
-        return
-    found = [path for path in found if path.exists()]
-    if found:
-        os.environ["PYPARDISO_MKL_RT"] = str(found[0].resolve())
-
-
 class PardisoFactor(Factor):
     """MKL PARDISO Cholesky. The factor stays inside the MKL handle and every solve calls
     phase 33 (forward/backward substitution) directly, so pypardiso neither copies nor
@@ -119,7 +114,6 @@ class PardisoFactor(Factor):
 
     def __init__(self, A, memory_limit_bytes: float | None = None):
         super().__init__(A)
-        _name_mkl_library()
         import pypardiso
         start = time.perf_counter()
         self.upper = sp.triu(A, format="csr")
@@ -240,14 +234,12 @@ def choose(n: int, methods: list[str] | None = None) -> list[str]:
     return order
 
 
-def factorize(A, method: str = "auto", near_null: np.ndarray | None = None, console=None) -> Factor:
-    """Set up a solver for the SPD matrix A [any units].
+def factorize(A, method: str = "auto", near_null: np.ndarray | None = None) -> Factor:
+    """Set up a solver for the SPD matrix A [any units]; logs the method that ran.
 
-    method    : "auto" or one of :data:`METHODS`; ``$FEMSTUDY_SOLVER`` replaces "auto"
+    method    : "auto" or one of :data:`METHODS`
     near_null : (n, 6) rigid-body modes for AMG (ignored by the direct methods)
-    Prints the method that ran through ``console.progress`` when a console is given.
     """
-    method = os.environ.get("FEMSTUDY_SOLVER", method) if method == "auto" else method
     require(method == "auto" or method in METHODS,
             f"unknown linear solver '{method}': choose auto or one of {', '.join(METHODS)}")
     A = sp.csr_matrix(A)
@@ -278,11 +270,9 @@ def factorize(A, method: str = "auto", near_null: np.ndarray | None = None, cons
             # the other direct methods fill in as much (CHOLMOD measured 10 % less, SuperLU more)
             # and have no estimate to check first: go to the iterative method
             candidates[:] = [m for m in candidates if m == "amg"]
-            if console is not None:
-                console.warn(f"{name} does not fit in memory ({exc}); using AMG-CG")
+            log.warning("%s does not fit in memory (%s); using AMG-CG", name, exc)
             continue
-        if console is not None:
-            console.progress(f"linear solver {factor.describe()}")
+        log.info("linear solver %s", factor.describe())
         return factor
     raise UserError(f"no linear solver could handle {A.shape[0]:,} unknowns in "
                     f"{limit / 2**30:.1f} GiB of memory; use a coarser mesh")

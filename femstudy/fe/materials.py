@@ -5,7 +5,7 @@ shear (γ = 2ε), so σ = D ε with D the 6×6 stiffness [MPa]. Region codes fol
 :mod:`femstudy.femur_model`: the cortical material applies to CORTICAL, the cancellous one
 to both cancellous regions.
 
-The optional transversely isotropic cortex (``MaterialsSpec.cortical_model =
+The optional transversely isotropic cortex (``BoneMaterials.cortical_model =
 "transversely_isotropic"``) uses :data:`CORTICAL_TRANSVERSELY_ISOTROPIC`; the choice of
 values, and why the thesis's Table 2-2 is not used, is explained in docs/solver.md.
 """
@@ -18,6 +18,7 @@ import numpy as np
 
 from femstudy.errors import require
 from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
+from femstudy.materials import BoneMaterials
 
 
 @dataclass(frozen=True)
@@ -113,8 +114,8 @@ class ElementMaterials:
     description: str
 
 
-def element_materials(region: np.ndarray, materials, long_axis=None) -> ElementMaterials:
-    """Per-element stiffness and density from a :class:`femstudy.casefile.MaterialsSpec`.
+def element_materials(region: np.ndarray, materials: BoneMaterials, long_axis=None) -> ElementMaterials:
+    """Per-element stiffness and density from :class:`femstudy.materials.BoneMaterials`.
 
     ``long_axis`` (a unit vector, or one per element) orients the transversely isotropic
     cortex; it is required only for that model.
@@ -126,12 +127,12 @@ def element_materials(region: np.ndarray, materials, long_axis=None) -> ElementM
     cortical = region == CORTICAL
     cort, canc = materials.cortical, materials.cancellous
     density = np.where(cortical, cort.density_t_mm3, canc.density_t_mm3)
-    D_canc = isotropic_stiffness(canc.youngs_modulus_MPa, canc.poissons_ratio)
+    D_canc = isotropic_stiffness(canc.E_MPa, canc.nu)
+    cancellous_text = f"cancellous E = {canc.E_MPa / 1e3:g} GPa, ν = {canc.nu:g}"
     if materials.cortical_model == "isotropic":
-        D = np.stack([isotropic_stiffness(cort.youngs_modulus_MPa, cort.poissons_ratio), D_canc])
+        D = np.stack([isotropic_stiffness(cort.E_MPa, cort.nu), D_canc])
         return ElementMaterials(D, np.where(cortical, 0, 1), density,
-                                f"cortical E = {cort.youngs_modulus_GPa:g} GPa, ν = {cort.poissons_ratio:g}; "
-                                f"cancellous E = {canc.youngs_modulus_GPa:g} GPa, ν = {canc.poissons_ratio:g}")
+                                f"cortical E = {cort.E_MPa / 1e3:g} GPa, ν = {cort.nu:g}; {cancellous_text}")
     require(long_axis is not None, "the transversely isotropic cortex needs the bone's long axis")
     ti = CORTICAL_TRANSVERSELY_ISOTROPIC
     axis = np.asarray(long_axis, float)
@@ -147,5 +148,4 @@ def element_materials(region: np.ndarray, materials, long_axis=None) -> ElementM
     return ElementMaterials(D, index, density,
                             f"cortical transversely isotropic E_T = {ti.E_T_MPa / 1e3:g} GPa, "
                             f"E_L = {ti.E_L_MPa / 1e3:g} GPa, ν_TT = {ti.nu_TT:g}, ν_LT = {ti.nu_LT:g}, "
-                            f"G_LT = {ti.G_LT_MPa / 1e3:g} GPa; cancellous E = {canc.youngs_modulus_GPa:g} GPa, "
-                            f"ν = {canc.poissons_ratio:g}")
+                            f"G_LT = {ti.G_LT_MPa / 1e3:g} GPa; {cancellous_text}")

@@ -1,19 +1,28 @@
 """Natural frequencies and mode shapes: K φ = ω² M φ on the free DOFs.
 
-Shift-invert Lanczos (ARPACK through ``scipy.sparse.linalg.eigsh``) about σ = 0 finds the
-lowest modes; the operator (K − σM)⁻¹ = K_ff⁻¹ reuses the cached stiffness factorisation.
-With K in N/mm and M in tonne, ω² comes out in 1/s².
+Block shift-invert Krylov about σ = 0 with Rayleigh–Ritz: the space spanned by a block X0 of
+k + 2 vectors and K⁻¹M X0, (K⁻¹M)² X0, … (each block one multi-column solve with the study's
+factorisation of K_ff) is projected, and the lowest k Ritz pairs are accepted when every
+residual ‖Kφ − ω²Mφ‖ is below 1e-6 of ‖Kφ‖ (the frequency, a Rayleigh quotient, is then
+exact to ~1e-12).
+ARPACK's shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) needs the same factorisation
+but one single-vector solve per step, about 30 for 6 modes of the femur; the block method
+needs 3–5 block solves. With K in N/mm and M in tonne, ω² comes out in 1/s².
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.linalg import LinearOperator, eigsh
+import scipy.linalg
 
 from femstudy.errors import require
-from femstudy.fe.static import reduced, stiffness_factor
+from femstudy.fe.static import FactorizedSystem
+from femstudy.fe.subspace import grow_projection, orthonormal_complement, symmetric
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -28,16 +37,44 @@ class Modes:
         return 1.0 / self.frequency_Hz
 
 
-def solve_modal(system, bc, k: int = 6, method: str = "auto", console=None) -> Modes:
-    """The lowest ``k`` natural frequencies [Hz] and mode shapes of the clamped model."""
-    require(1 <= k < len(bc.free), f"cannot compute {k} modes of a model with {len(bc.free)} free DOFs")
-    factor = stiffness_factor(system, bc, method, console)
-    n = len(bc.free)
-    inverse = LinearOperator((n, n), matvec=factor.solve, dtype=float)
-    omega2, phi = eigsh(reduced(system, bc, "K"), k=k, M=reduced(system, bc, "M"), sigma=0.0,
-                        which="LM", OPinv=inverse)
-    order = np.argsort(omega2)
-    omega2, phi = omega2[order], phi[:, order]
-    if console is not None:
-        console.progress("natural frequencies: " + ", ".join(f"{f:.1f}" for f in np.sqrt(omega2) / (2 * np.pi)) + " Hz")
-    return Modes(np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi), bc.expand(phi))
+def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks: int = 20) -> Modes:
+    """The lowest natural frequencies [Hz] and mode shapes of the clamped model.
+
+    Parameters
+    ----------
+    fs : FactorizedSystem
+        Its K_ff factorisation is the shift-invert operator.
+    k : int
+        Number of modes.
+    rtol : float
+        Largest relative residual ‖Kφ − ω²Mφ‖ / ‖Kφ‖ accepted.
+
+    Returns
+    -------
+    Modes
+    """
+    n = fs.n_free
+    require(1 <= k < n, f"cannot compute {k} modes of a model with {n} free DOFs")
+    block = min(k + 2, n - 1)
+    X = np.random.default_rng(0).standard_normal((n, block))
+    V = np.zeros((n, 0))
+    Kr = Mr = np.zeros((0, 0))
+    for _ in range(max_blocks):
+        Q = orthonormal_complement(V, X)
+        if Q.shape[1] == 0:
+            break
+        KQ, MQ = fs.K @ Q, fs.mass(Q)
+        V = np.hstack([V, Q])
+        Kr, Mr = grow_projection(Kr, V, KQ, Q.shape[1]), grow_projection(Mr, V, MQ, Q.shape[1])
+        omega2, Phi = scipy.linalg.eigh(symmetric(Kr), symmetric(Mr))
+        omega2, phi = omega2[:k], V @ Phi[:, :k]
+        stiffness = fs.K @ phi
+        residual = np.linalg.norm(stiffness - fs.mass(phi) * omega2, axis=0) / np.linalg.norm(stiffness, axis=0)
+        if residual.max() <= rtol or V.shape[1] + block > n:
+            break
+        X = fs.factor.solve(MQ)
+    require(residual.max() <= max(rtol, 1e-4), f"the lowest {k} modes did not converge (relative residual "
+                                               f"{residual.max():.1e} after {V.shape[1]} vectors)")
+    frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi)
+    log.info("natural frequencies: %s Hz", ", ".join(f"{f:.1f}" for f in frequencies))
+    return Modes(frequencies, fs.bc.expand(phi))

@@ -1,68 +1,118 @@
-"""Static equilibrium K_ff u_f = f_f on the free DOFs (u = 0 on the clamps).
+"""The clamped model factorised once: K_ff u_f = f_f on the free DOFs (u = 0 on the clamps).
 
-The reduced matrices and the stiffness factorisation are cached on the system per
-constraint set, so a static solve, the quasi-static reference of a transient and the modal
-shift-invert all share one factorisation of K_ff.
+:func:`factorize` restricts K and M to the free DOFs and factorises K_ff; the static solve,
+the modal analysis (shift-invert about 0 is K_ff⁻¹) and the transient's reduced basis
+(femstudy.fe.transient) all use that one factorisation.
 """
 
 from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from femstudy.fe import linsolve
+from femstudy.fe.assembly import FESystem
+from femstudy.fe.constraints import Constraints
+
+log = logging.getLogger(__name__)
 
 
-def reduced(system, bc, name: str):
-    """K_ff or M_ff (``name`` "K" or "M"), cached. Both use one reduced pattern (K and M share
-    theirs), so ``K_ff.indices is M_ff.indices`` and K_ff + c M_ff is a sum of data arrays."""
-    key = (bc.key, name)
-    if key not in system.cache:
-        indptr, indices, source = _free_pattern(system, bc)
-        full = system.K if name == "K" else system.M
-        system.cache[key] = sp.csr_matrix((full.data[source], indices, indptr), shape=(len(bc.free),) * 2)
-    return system.cache[key]
+@dataclass(frozen=True, eq=False)
+class FactorizedSystem:
+    """An assembled model under one set of clamps, with K_ff factorised.
+
+    system : the assembled :class:`~femstudy.fe.assembly.FESystem`
+    bc     : the clamps (:class:`~femstudy.fe.constraints.Constraints`)
+    K, M   : K_ff [N/mm] and M_ff [tonne], CSR on one shared pattern, so K + c M is a sum of
+             their data arrays
+    factor : the solver of K_ff (:class:`femstudy.fe.linsolve.Factor`)
+    """
+
+    system: FESystem
+    bc: Constraints
+    K: sp.csr_matrix
+    M: sp.csr_matrix
+    factor: linsolve.Factor
+
+    @property
+    def n_free(self) -> int:
+        return len(self.bc.free)
+
+    @property
+    def method(self) -> str:
+        """The linear solver that factorised K_ff (pardiso, cholmod, superlu or amg)."""
+        return self.factor.method
+
+    def solve(self, f: np.ndarray) -> np.ndarray:
+        """Displacements u [mm] (full DOF vector, or one column per load) for forces f [N]."""
+        f = np.asarray(f, dtype=float)
+        return self.bc.expand(self.factor.solve(f[self.bc.free]))
+
+    def mass(self, x_free: np.ndarray) -> np.ndarray:
+        """M_ff x [N per mm/s²] for x (n_free,) or (n_free, k), through the nodal mass
+        (M = M_nodes ⊗ I₃: a ninth of M's entries to read)."""
+        full = np.zeros((self.system.n_dofs,) + x_free.shape[1:])
+        full[self.bc.free] = x_free
+        nodal = full.reshape(self.system.M_nodes.shape[0], -1)  # a node's 3 (× k) values per row
+        return (self.system.M_nodes @ nodal).reshape(full.shape)[self.bc.free]
+
+    def near_null_space(self) -> np.ndarray:
+        """Rigid-body modes restricted to the free DOFs (for AMG)."""
+        return linsolve.rigid_body_modes(self.system.nodes)[self.bc.free]
 
 
-def _free_pattern(system, bc):
-    """The pattern of the free-DOF block of K and M, and the position in K.data / M.data of
-    each of its entries (found once by restricting a matrix whose entries are their positions)."""
-    key = (bc.key, "pattern")
-    if key not in system.cache:
-        K = system.K
-        positions = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=float), K.indices, K.indptr), shape=K.shape)
-        free = positions[bc.free][:, bc.free].tocsr()
-        system.cache[key] = free.indptr, free.indices, free.data.astype(np.int64) - 1
-    return system.cache[key]
+def _free_block(system: FESystem, bc: Constraints) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """K_ff and M_ff on one pattern: the positions in K.data of the free block's entries are
+    found once by restricting a matrix whose entries are their positions (K and M share theirs)."""
+    K = system.K
+    positions = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=float), K.indices, K.indptr), shape=K.shape)
+    free = positions[bc.free][:, bc.free].tocsr()
+    source = free.data.astype(np.int64) - 1
+    shape = (len(bc.free),) * 2
+    return (sp.csr_matrix((system.K.data[source], free.indices, free.indptr), shape=shape),
+            sp.csr_matrix((system.M.data[source], free.indices, free.indptr), shape=shape))
 
 
-def mass_product(system, bc):
-    """x_f ↦ M_ff x_f [N per mm/s²] through the nodal mass (M = M_nodes ⊗ I₃): a ninth of
-    M's entries to read, the product that dominates a transient step after the solve."""
-    def product(x_free: np.ndarray) -> np.ndarray:  # x_free (n_free,) or (n_free, k)
-        full = np.zeros((system.n_dofs,) + x_free.shape[1:])
-        full[bc.free] = x_free
-        nodal = full.reshape(system.M_nodes.shape[0], -1)  # a node's 3 (× k) values per row
-        return (system.M_nodes @ nodal).reshape(full.shape)[bc.free]
-    return product
+def factorize(system: FESystem, bc: Constraints, solver: str = "auto") -> FactorizedSystem:
+    """Restrict the model to the free DOFs of ``bc`` and factorise K_ff.
+
+    Parameters
+    ----------
+    system : FESystem
+        From :func:`femstudy.fe.assemble`.
+    bc : Constraints
+        From :func:`femstudy.fe.clamp` or :func:`femstudy.fe.fix_facets`.
+    solver : str
+        "auto" or one of :data:`femstudy.fe.linsolve.METHODS`.
+
+    Returns
+    -------
+    FactorizedSystem
+
+    Examples
+    --------
+    >>> fs = factorize(system, bc)                      # doctest: +SKIP
+    >>> u = solve_static(fs, patch.force(30.0, 40.0))   # doctest: +SKIP
+    """
+    K, M = _free_block(system, bc)
+    factor = linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free])
+    return FactorizedSystem(system, bc, K, M, factor)
 
 
-def near_null_space(system, bc) -> np.ndarray:
-    """Rigid-body modes restricted to the free DOFs (for AMG)."""
-    return linsolve.rigid_body_modes(system.nodes)[bc.free]
+def solve_static(fs: FactorizedSystem, f: np.ndarray) -> np.ndarray:
+    """Static displacements u [mm] (full DOF vector, or one column per load) under forces f [N].
 
+    Parameters
+    ----------
+    fs : FactorizedSystem
+    f : ndarray, (n_dofs,) or (n_dofs, k)
 
-def stiffness_factor(system, bc, method: str = "auto", console=None) -> linsolve.Factor:
-    """The (cached) solver for K_ff."""
-    key = (bc.key, "K-factor", method)
-    if key not in system.cache:
-        system.cache[key] = linsolve.factorize(reduced(system, bc, "K"), method,
-                                               near_null_space(system, bc), console)
-    return system.cache[key]
-
-
-def solve_static(system, bc, f: np.ndarray, method: str = "auto", console=None) -> np.ndarray:
-    """Displacements u [mm] (full DOF vector, or one column per load) for forces f [N]."""
-    f = np.asarray(f, dtype=float)
-    factor = stiffness_factor(system, bc, method, console)
-    return bc.expand(factor.solve(f[bc.free]))
+    Returns
+    -------
+    ndarray
+        Same shape as ``f``; zero on the clamped DOFs.
+    """
+    return fs.solve(f)

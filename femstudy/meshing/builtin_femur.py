@@ -257,3 +257,26 @@ def write_stl(path, surf, header: str = "") -> None:
     head = header.encode("ascii", "replace")[:80].ljust(80, b" ")
     with atomic.atomic_path(path) as tmp:
         tmp.write_bytes(head + struct.pack("<I", len(tri)) + rec.tobytes())
+
+
+def write_femur(path, parameters: FemurParameters = FemurParameters()):
+    """Generate a femur from ``parameters`` and write it as binary STL; returns the surface.
+
+    Parameters
+    ----------
+    path : path-like
+        The STL to write (atomically; through a link, to its target).
+    parameters : FemurParameters
+        Length, head, neck, shaft … [mm, degrees]; the defaults give the built-in femur.
+
+    Returns
+    -------
+    pyvista.PolyData
+
+    Examples
+    --------
+    >>> surf = write_femur("small.stl", FemurParameters(length_mm=400, triangles=4000))  # doctest: +SKIP
+    """
+    surf = generate(parameters)
+    write_stl(Path(path).resolve(), surf, header=f"femstudy built-in femur {parameters.digest()}")
+    return surf

@@ -14,21 +14,19 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
+import logging
 import shutil
 from pathlib import Path
 
 import numpy as np
 
 from femstudy import __version__, atomic
-from femstudy.console import Console
+
+log = logging.getLogger(__name__)
 
 LAYOUT = 2
-
-
-def cache_root() -> Path:
-    """``$FEMSTUDY_CACHE`` if set, else ``./.femstudy-cache``."""
-    return Path(os.environ.get("FEMSTUDY_CACHE") or ".femstudy-cache")
+#: The cache folder when none is given (the command line reads ``$FEMSTUDY_CACHE``).
+DEFAULT_CACHE_DIR = Path(".femstudy-cache")
 
 
 def cache_key(parts: dict) -> str:
@@ -45,9 +43,9 @@ def _sha256(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def load(key: str, root: Path | None = None) -> tuple[dict, dict] | None:
+def load(key: str, root: Path = DEFAULT_CACHE_DIR) -> tuple[dict, dict] | None:
     """(arrays, meta) of a verified entry, or None if absent or corrupted (then removed)."""
-    folder = (root or cache_root()) / key
+    folder = Path(root) / key
     if not folder.is_dir():
         return None
     try:
@@ -58,18 +56,18 @@ def load(key: str, root: Path | None = None) -> tuple[dict, dict] | None:
         with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
     except (OSError, ValueError, KeyError, json.JSONDecodeError) as exc:
-        Console.warn(f"mesh cache entry {key[:12]} in {folder.parent} is corrupted ({exc}); rebuilding it")
+        log.warning("mesh cache entry %s in %s is corrupted (%s); rebuilding it", key[:12], folder.parent, exc)
         shutil.rmtree(folder, ignore_errors=True)
         return None
     return arrays, meta
 
 
-def store(key: str, arrays: dict, meta: dict, root: Path | None = None) -> Path:
+def store(key: str, arrays: dict, meta: dict, root: Path = DEFAULT_CACHE_DIR) -> Path:
     """Write an entry atomically; returns its folder."""
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
     data = buf.getvalue()
-    folder = (root or cache_root()) / key
+    folder = Path(root) / key
     with atomic.atomic_folder(folder) as tmp:
         (tmp / "mesh.npz").write_bytes(data)
         (tmp / "meta.json").write_text(json.dumps({**meta, "mesh_sha256": _sha256(data)}, indent=1,

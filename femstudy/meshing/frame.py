@@ -1,20 +1,22 @@
 """Anatomical frame of a femur surface: units, long axis, proximal end, anterior, side.
 
-Detection, each step overridable from the case file (``geometry.units``, ``long_axis``,
-``proximal_end``, ``anterior``, ``side``):
+Detection works on a femur in any pose (a CT scanner's frame, say), mirrored or not, in mm,
+cm, m or inches; each step can be overridden from the case file (``geometry.units``,
+``long_axis``, ``proximal_end``, ``anterior``, ``side``):
 
-* units: an adult femur is 0.25-0.7 m long, so the extent along the principal axis tells
-  metres, centimetres, inches or millimetres apart;
 * long axis: the principal axis of largest variance of the area-weighted triangle centroids;
-* proximal end: the femoral head sits on the neck, well off the shaft axis, while the
-  condyles straddle it; the end whose last 6 % of length has its centroid further from the
-  shaft line (fitted through the middle 40 %) is proximal;
+* units: an adult femur is 0.25-0.7 m long, so the extent along the long axis tells
+  metres, centimetres, inches or millimetres apart;
+* proximal end: the end carrying the femoral head, a near-spherical cap, or else the end
+  opposite the pair of condyles (:mod:`femstudy.meshing.bone_ends`);
 * medial-lateral axis: the widest direction of the condyles (principal axis of the distal
-  15 % cross-section), signed towards the head (medial);
+  15 % cross-section), signed towards the head's centre (medial);
 * anterior: the condyles project posteriorly from the shaft line and the shaft bows
   anteriorly; both are measured and the sign with their (length-normalised) sum wins;
 * side: in a right-handed frame, anterior × proximal points to the subject's right, which is
   medial for a left femur.
+
+A step that cannot decide raises :class:`~femstudy.errors.UserError` with what it measured.
 """
 
 from __future__ import annotations
@@ -24,13 +26,15 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from femstudy.errors import UserError, require
+from femstudy.meshing import bone_ends
+from femstudy.meshing.surface import surface_samples
 
 UNIT_SCALE = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: Plausible femur lengths in each unit (an adult femur is 250-700 mm).
-#: Smallest offset of the head's end from the shaft line, as a fraction of the length (a real
-#: femur: 35-50 mm on 400-480 mm, about 0.1).
-HEAD_OFFSET_MIN = 0.04
 UNIT_RANGES = {"m": (0.2, 0.75), "in": (8.0, 24.0), "cm": (24.5, 75.0), "mm": (200.0, 750.0)}
+#: Smallest |condyle offset − shaft bow| that tells anterior from posterior, as a fraction of
+#: the length (the built-in femur: 0.031; nine real femurs: 0.055-0.075, docs/meshing.md).
+ANTERIOR_MIN_SCORE = 0.01
 
 
 @dataclass
@@ -118,26 +122,31 @@ def principal_axes(points: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray,
     return c, v[:, ::-1].T
 
 
-def _area_samples(points: np.ndarray, triangles: np.ndarray, per_extent: int = 80):
-    """Centres and areas of the surface's triangles after subdividing any triangle longer
-    than 1/``per_extent`` of the bone, so that every slice along the bone holds samples
-    even on a coarse triangulation (a CAD export with long slivers, say)."""
-    import pyvista as pv
-
-    extent = float(np.ptp(points, axis=0).max())
-    v = points[triangles]
-    if np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2).max() > extent / per_extent:
-        fine = pv.PolyData.from_regular_faces(points, triangles).subdivide_adaptive(max_edge_len=extent / per_extent)
-        v = np.asarray(fine.points, float)[fine.regular_faces]
-    return v.mean(axis=1), 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-
-
 def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Frame, np.ndarray]:
     """Detect the frame of a raw surface; returns the frame and the points converted to mm.
 
-    ``geometry`` is the case's :class:`~femstudy.casefile.GeometrySpec`.
+    Parameters
+    ----------
+    points, triangles
+        The surface in the file's units: (n, 3) coordinates, (m, 3) vertex indices.
+    geometry
+        The case's :class:`~femstudy.casefile.GeometrySpec` (its overrides are honoured).
+
+    Returns
+    -------
+    (Frame, points in mm)
+
+    Example
+    -------
+    >>> from femstudy.casefile import GeometrySpec
+    >>> from femstudy.meshing.builtin_femur import BUILTIN_STL
+    >>> from femstudy.meshing.surface import read_surface
+    >>> s = read_surface(BUILTIN_STL)
+    >>> frame, _ = build_frame(s.points, s.triangles, GeometrySpec())
+    >>> frame.side, frame.units, [round(float(c)) for c in frame.up]
+    ('left', 'mm', [0, 0, 1])
     """
-    centres, areas = _area_samples(points, triangles)
+    centres, normals, areas = surface_samples(points, triangles)
     _, axes = principal_axes(centres, areas)
     overridden: list[str] = []
     axis = axes[0]
@@ -155,7 +164,6 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
     h = centres @ axis
     lo, hi = float((pts @ axis).min()), float((pts @ axis).max())
     length = float(hi - lo)
-    evidence: dict = {}
 
     # shaft line through centroids of the middle 40 %, as a function of height
     def centroid(sel):
@@ -173,23 +181,20 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
         d = p - q
         return d - (d @ axis) * axis
 
-    end_plus, end_minus = centroid(t > 0.94), centroid(t < 0.06)
-    off_plus, off_minus = np.linalg.norm(off_shaft(end_plus)), np.linalg.norm(off_shaft(end_minus))
-    evidence["end_offsets_mm"] = {"+": round(float(off_plus), 1), "-": round(float(off_minus), 1)}
+    ends = {e: bone_ends.describe_end(centres, normals, areas, axis, e, length) for e in "+-"}
+    evidence: dict = {"ends": {e: shape.summary() for e, shape in ends.items()}}
     if geometry.proximal_end != "auto":
         sign = 1.0 if geometry.proximal_end == "+" else -1.0
         overridden.append("proximal_end")
     else:
-        sign = 1.0 if off_plus > off_minus else -1.0
+        sign = 1.0 if bone_ends.proximal_end(ends["+"], ends["-"]) == "+" else -1.0
     up = sign * axis
-    # the femoral head sits 35-50 mm off the shaft line; demand a clear, one-sided offset
-    if geometry.proximal_end == "auto" and (max(off_plus, off_minus) < HEAD_OFFSET_MIN * length
-                                            or max(off_plus, off_minus) < 1.3 * min(off_plus, off_minus)):
-        raise UserError(f"cannot tell which end of the bone is proximal: neither end is offset from the shaft "
-                        f"like a femoral head (end offsets {off_plus:.1f} and {off_minus:.1f} mm); "
-                        "set geometry.proximal_end (and check that the surface is a femur)")
+    evidence["proximal_end"] = "+" if sign > 0 else "-"
     s = (hi - h) / length if sign > 0 else (h - lo) / length
-    head_dir = off_shaft(end_plus if sign > 0 else end_minus)
+    top_end = ends["+" if sign > 0 else "-"]
+    # medial: towards the head's centre, or the centroid of the top 6 % when no head was found
+    head_centre = top_end.first.centre if top_end.head else centroid(s < 0.06)
+    head_dir = off_shaft(head_centre)
     # medial-lateral: widest direction of the distal 15 %, signed towards the head
     sel = s > 0.85
     _, dax = principal_axes(centres[sel] - np.outer(centres[sel] @ up, up), areas[sel])
@@ -200,10 +205,11 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
     cand = _unit(np.cross(up, ml))  # anterior if the bone is a left femur; the sign is tested next
     condyles = off_shaft(centroid((s > 0.85) & (s < 0.97))) @ cand
     bow_mid = off_shaft(centroid((s > 0.45) & (s < 0.55))) @ cand
-    ends = 0.5 * (off_shaft(centroid((s > 0.25) & (s < 0.3))) + off_shaft(centroid((s > 0.72) & (s < 0.77)))) @ cand
-    bow = bow_mid - ends
+    ends_bow = 0.5 * (off_shaft(centroid((s > 0.25) & (s < 0.3))) + off_shaft(centroid((s > 0.72) & (s < 0.77)))) @ cand
+    bow = bow_mid - ends_bow
     score = (-condyles + bow) / length
-    evidence.update(condyle_offset_mm=round(float(condyles), 1), shaft_bow_mm=round(float(bow), 1))
+    evidence.update(head_offset_mm=round(float(np.linalg.norm(head_dir)), 1),
+                    condyle_offset_mm=round(float(condyles), 1), shaft_bow_mm=round(float(bow), 1))
     anterior = cand if score > 0 else -cand
     if geometry.anterior != "auto":
         a = _unit(geometry.anterior)
@@ -214,8 +220,15 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
     elif geometry.side != "auto":
         # a stated side fixes the sign of anterior, given the medial direction of the head
         anterior = _unit(np.cross(up, ml)) * (1 if geometry.side == "left" else -1)
+    elif abs(score) < ANTERIOR_MIN_SCORE:
+        raise UserError(f"cannot tell anterior from posterior: in the sagittal plane the condyles lie "
+                        f"{abs(condyles):.1f} mm off the shaft line and the shaft bows {abs(bow):.1f} mm (on the femurs "
+                        "measured the condyles lie 10-26 mm behind it and the shaft bows 4-6 mm forwards); set "
+                        "geometry.side or geometry.anterior")
     right = np.cross(anterior, up)
     side = "left" if right @ head_dir > 0 else "right"
+    head_along_ml = float(head_dir @ (right if side == "left" else -right))
+    evidence["head_forward_angle_deg"] = round(float(np.degrees(np.arctan2(head_dir @ anterior, head_along_ml))), 1)
     if geometry.side != "auto":
         if geometry.side != side:
             evidence["side_note"] = f"detected {side}, set to {geometry.side} by the case file"

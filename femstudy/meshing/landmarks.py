@@ -20,8 +20,6 @@ from femstudy.errors import UserError
 from femstudy.femur_model import CORTICAL, Clamps, DrillSite, TetMesh
 from femstudy.meshing.frame import Frame
 
-DRILL_RADIUS_MM = 1.35
-
 
 def boundary_faces(mesh: TetMesh) -> np.ndarray:
     """Faces (k, 3) belonging to exactly one tet, ordered so their normals point outwards."""
@@ -125,12 +123,14 @@ def entry_point(tri: np.ndarray, frame: Frame, site, centre: np.ndarray) -> tupl
     return start - side * t.min(), int(np.argmin(t))
 
 
-def drill_site(mesh: TetMesh, frame: Frame, faces_outer: np.ndarray, site, centre) -> DrillSite:
-    """The drill site of ``site`` (the case's SiteSpec) on the mesh's outer surface."""
+def drill_site(mesh: TetMesh, frame: Frame, faces_outer: np.ndarray, site, centre,
+               drill_radius_mm: float) -> DrillSite:
+    """The drill site of ``site`` (the case's SiteSpec) on the mesh's outer surface; the
+    normal is averaged over the drill's footprint (radius ``drill_radius_mm``)."""
     tri = mesh.points[faces_outer]
     entry, hit = entry_point(tri, frame, site, centre)
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 × area
-    near = np.linalg.norm(tri.mean(axis=1) - entry, axis=1) < DRILL_RADIUS_MM
+    near = np.linalg.norm(tri.mean(axis=1) - entry, axis=1) < drill_radius_mm
     near[hit] = True
     normal = normals[near].sum(axis=0)
     normal /= np.linalg.norm(normal)

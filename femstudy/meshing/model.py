@@ -1,18 +1,39 @@
-"""``build_femur_model``: from a case to a cached, region-marked tet mesh with landmarks."""
+"""``build_femur_model``: from a femur description to a cached, region-marked tet mesh with landmarks."""
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from femstudy.console import Console
 from femstudy.errors import UserError
 from femstudy.femur_model import REGION_NAMES, Clamps, DrillSite, TetMesh
 from femstudy.meshing import cache, landmarks
 from femstudy.meshing.frame import Frame
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class FemurSpec:
+    """What the meshed femur depends on.
+
+    surface         : the bone's surface file, or None for the built-in femur
+    geometry, mesh, site : sections of a case file (:class:`femstudy.casefile.GeometrySpec`,
+                      ``MeshSpec``, ``SiteSpec``) or anything with the same fields
+    drill_radius_mm : the drill's radius: the site is refined over twice it
+    clamp_length_mm : surface length clamped at each end, along the long axis
+    """
+
+    surface: Path | None
+    geometry: object
+    mesh: object
+    site: object
+    drill_radius_mm: float
+    clamp_length_mm: float
 
 
 @dataclass
@@ -36,14 +57,15 @@ def surface_edge_mm(size_mm: float) -> float:
     return float(np.clip(0.6 * size_mm, 2.5, 8.0))
 
 
-def _surface_file(case) -> Path:
+def surface_file(spec: FemurSpec, cache_dir: Path) -> Path:
+    """The surface file to mesh: the spec's, else the built-in femur's (regenerated in the cache
+    when the package lacks it)."""
     from femstudy.meshing.builtin_femur import BUILTIN_STL, FemurParameters, generate, write_stl
 
-    path = case.surface_path()
-    if path is not None:
-        return path
+    if spec.surface is not None:
+        return Path(spec.surface)
     if not BUILTIN_STL.is_file():  # a packaging without the data file: regenerate it once
-        target = cache.cache_root() / "builtin" / BUILTIN_STL.name
+        target = Path(cache_dir) / "builtin" / BUILTIN_STL.name
         if not target.is_file():
             par = FemurParameters()
             write_stl(target, generate(par), header=f"femstudy built-in femur {par.digest()}")
@@ -51,72 +73,88 @@ def _surface_file(case) -> Path:
     return BUILTIN_STL
 
 
-def mesh_parameters(case, size_mm: float, with_site: bool = True) -> dict:
-    """Every case value that changes the tet mesh (the cache key's parameters); without the
-    site refinement's values when ``with_site`` is false (the TetWild stage's key)."""
-    g = case.geometry.model_dump(mode="json")
-    g.pop("surface")
-    m = case.mesh
+def mesh_parameters(spec: FemurSpec, size_mm: float, with_site: bool = True) -> dict:
+    """Every value that changes the tet mesh (the cache key's parameters); without the site
+    refinement's values when ``with_site`` is false (the TetWild stage's key)."""
+    g = spec.geometry.model_dump(mode="json")
+    g.pop("surface", None)
+    # a file with several bodies is meshed only with bodies = "largest", and a file with one
+    # is meshed alike either way: the setting never tells two meshes apart
+    g.pop("bodies", None)
+    m = spec.mesh
     params = {"geometry": g, "size_mm": size_mm, "envelope": m.envelope}
     if with_site and m.refine == "site":
         params.update(refine="site", site_size_mm=m.site_size_mm, site_radius_mm=m.site_radius_mm,
-                      site_position=case.site.position, site_direction=case.site.direction)
+                      site_position=spec.site.position, site_direction=spec.site.direction,
+                      drill_radius_mm=spec.drill_radius_mm)
     return params
 
 
-def build_femur_model(case, console: Console | None = None, mesh_size_mm: float | None = None) -> FemurModel:
-    """Mesh the case's femur (or load it from the cache) and locate its clamps and drill site.
+def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR,
+                      mesh_size_mm: float | None = None) -> FemurModel:
+    """Mesh the femur (or load it from the cache) and locate its clamps and drill site.
 
-    ``mesh_size_mm`` overrides ``case.mesh.size_mm``.
+    Parameters
+    ----------
+    spec : FemurSpec
+        The surface and the geometry, mesh and site settings.
+    cache_dir : Path
+        Folder of the mesh cache (created when needed).
+    mesh_size_mm : float, optional
+        Overrides ``spec.mesh.size_mm``.
+
+    Returns
+    -------
+    FemurModel
     """
-    console = console or Console(quiet=True)
-    size = float(mesh_size_mm if mesh_size_mm is not None else case.mesh.size_mm)
+    size = float(mesh_size_mm if mesh_size_mm is not None else spec.mesh.size_mm)
     if not size > 0:
         raise UserError(f"mesh size must be positive, got {size:g} mm")
-    path = _surface_file(case)
-    from femstudy.meshing.surface import file_digest
+    cache_dir = Path(cache_dir)
+    path = surface_file(spec, cache_dir)
+    from femstudy.meshing.surface import check_surface_file, file_digest
 
-    if not path.is_file():
-        raise UserError(f"surface file {path} does not exist")
+    check_surface_file(path)
     digest = file_digest(path)
-    key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(case, size)})
+    key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size)})
     start = time.perf_counter()
-    hit = cache.load(key)
+    hit = cache.load(key, cache_dir)
     if hit is None:
         # two stages, cached apart: the TetWild mesh (shared by every drill site) and its
-        # refinement around this case's site
-        base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(case, size, with_site=False)})
-        base = cache.load(base_key) if base_key != key else None
+        # refinement around this site
+        base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size, with_site=False)})
+        base = cache.load(base_key, cache_dir) if base_key != key else None
         if base is None:
-            console.progress(f"meshing {path.name} at {size:g} mm (not cached)")
-            base = _build(case, path, size, console)
+            log.info("meshing %s at %g mm (not cached)", path.name, size)
+            base = _build(spec, path, size)
             if base_key != key:
-                cache.store(base_key, *base)
+                cache.store(base_key, *base, root=cache_dir)
         else:
-            console.progress(f"loaded the cached TetWild mesh {base_key[:12]}; refining it at the drill site")
-        arrays, meta = _finish(case, size, *base, console)
-        cache.store(key, arrays, meta)
+            log.info("loaded the cached TetWild mesh %s; refining it at the drill site", base_key[:12])
+        arrays, meta = _finish(spec, size, *base)
+        cache.store(key, arrays, meta, root=cache_dir)
     else:
-        console.progress(f"loaded cached mesh {key[:12]} ({cache.cache_root()})")
+        log.info("loaded cached mesh %s (%s)", key[:12], cache_dir)
         arrays, meta = hit
     mesh = TetMesh(arrays["points"], arrays["tets"].astype(np.int64), arrays["region"].astype(np.int8))
     frame = Frame.from_dict(meta["frame"])
     outer = landmarks.outer_faces(mesh, frame)
-    clamps = landmarks.clamps(mesh, frame, outer, case.clamps.length_mm)
-    centre = landmarks.section_centre(mesh.points, outer, frame, case.site.position)
-    site = landmarks.drill_site(mesh, frame, outer, case.site, centre)
+    clamps = landmarks.clamps(mesh, frame, outer, spec.clamp_length_mm)
+    centre = landmarks.section_centre(mesh.points, outer, frame, spec.site.position)
+    site = landmarks.drill_site(mesh, frame, outer, spec.site, centre, spec.drill_radius_mm)
     stats = dict(meta["stats"])
-    stats.update(_landmark_stats(mesh, outer, site, clamps))
+    stats.update(_landmark_stats(mesh, outer, site, clamps, spec.drill_radius_mm))
     stats.update(cache_hit=hit is not None, cache_key=key, load_or_build_seconds=time.perf_counter() - start)
     return FemurModel(mesh, clamps, site, frame, meta["quality"], stats, arrays["canal_axis"])
 
 
-def _landmark_stats(mesh, outer, site, clamps) -> dict:
+def _landmark_stats(mesh, outer, site, clamps, drill_radius_mm: float) -> dict:
     """Facets under the drill-load disk and their edge lengths; clamped node counts."""
     tri = mesh.points[outer]
-    near = np.linalg.norm(tri.mean(axis=1) - site.entry_point, axis=1) < landmarks.DRILL_RADIUS_MM
+    near = np.linalg.norm(tri.mean(axis=1) - site.entry_point, axis=1) < drill_radius_mm
     edges = np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
     return {
+        "drill_radius_mm": drill_radius_mm,
         "site_facets_in_drill_disk": int(near.sum()),
         "site_edge_mm": float(np.median(edges[near])) if near.any() else float("nan"),
         "site_cortical_thickness_mm": site.cortical_thickness_mm,
@@ -124,43 +162,43 @@ def _landmark_stats(mesh, outer, site, clamps) -> dict:
     }
 
 
-def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]:
+def _build(spec: FemurSpec, path: Path, size: float) -> tuple[dict, dict]:
     from femstudy.meshing import regions, surface, tetra
     from femstudy.meshing.frame import build_frame
 
-    raw = surface.read_surface(path)
-    frame, _ = build_frame(raw.points, raw.triangles, case.geometry)
-    console.progress(f"surface: {len(raw.triangles)} triangles, units {frame.units} "
-                     f"(x{frame.scale_to_mm:g} to mm), {frame.side} femur, length {frame.length_mm:.1f} mm"
-                     + (f"; overridden: {', '.join(frame.overridden)}" if frame.overridden else ""))
-    landmarks.drill_side(frame, case.site)  # refuse a bad drill direction before TetWild runs
+    raw = surface.read_surface(path, spec.geometry.bodies)
+    frame, _ = build_frame(raw.points, raw.triangles, spec.geometry)
+    log.info("surface: %d triangles, units %s (x%g to mm), %s femur, length %.1f mm%s", len(raw.triangles),
+             frame.units, frame.scale_to_mm, frame.side, frame.length_mm,
+             f"; overridden: {', '.join(frame.overridden)}" if frame.overridden else "")
+    landmarks.drill_side(frame, spec.site)  # refuse a bad drill direction before TetWild runs
     for note in raw.repairs:
-        console.progress(f"repaired: {note}")
+        log.info("repaired: %s", note)
     surf_mm = raw.scaled(frame.scale_to_mm)
     edge = surface_edge_mm(size)
     outer = surface.simplify(surf_mm, edge)
     if len(outer.repairs) > len(raw.repairs):
-        console.progress(outer.repairs[-1])
-    console.progress(f"regions: cortex, canal and cancellous fields on a {regions.VOXEL_MM:g} mm grid")
-    fields = regions.build_fields(outer, frame, case.geometry)
+        log.info(outer.repairs[-1])
+    log.info("regions: cortex, canal and cancellous fields on a %g mm grid", regions.VOXEL_MM)
+    fields = regions.build_fields(outer, frame, spec.geometry)
     inner = _simplified(regions.level_surface(fields, "inner"), edge)
     canal_closed = regions.level_surface(fields, "canal")
     patch = _simplified(regions.level_surface(fields, "canal", clip_by="inner", clip_above=0.25 * fields.spacing), edge)
-    console.progress(f"regions: inner surface {inner.n_cells} triangles, canal {canal_closed.volume:.0f} mm^3")
+    log.info("regions: inner surface %d triangles, canal %.0f mm^3", inner.n_cells, canal_closed.volume)
     parts = [(outer.points, outer.triangles)] + [(m.points, m.regular_faces) for m in (inner, patch) if m.n_cells]
     n_in = sum(len(t) for _, t in parts)
-    console.progress(f"TetWild: {n_in} input triangles, target edge {size:g} mm, envelope {case.mesh.envelope:g}")
-    points, tets, seconds = tetra.tetrahedralize(parts, size, case.mesh.envelope)
-    console.progress(f"TetWild finished in {seconds:.1f} s: {len(tets)} tets in its background mesh")
-    region = tetra.classify(points, tets, fields, frame, (case.geometry.canal.proximal_fraction,
-                                                          case.geometry.canal.distal_fraction))
+    log.info("TetWild: %d input triangles, target edge %g mm, envelope %g", n_in, size, spec.mesh.envelope)
+    points, tets, seconds = tetra.tetrahedralize(parts, size, spec.mesh.envelope)
+    log.info("TetWild finished in %.1f s: %d tets in its background mesh", seconds, len(tets))
+    region = tetra.classify(points, tets, fields, frame, (spec.geometry.canal.proximal_fraction,
+                                                          spec.geometry.canal.distal_fraction))
     mesh = tetra.compact(points, tets, region)
     stats = {
         "surface_volume_mm3": surf_mm.volume, "simplified_surface_volume_mm3": outer.volume,
         "canal_volume_mm3": float(canal_closed.volume),
         "canal_midshaft_diameter_mm": _midshaft_canal_diameter(fields, frame),
         "input_triangles": {"surface": len(raw.triangles), "tetwild": n_in},
-        "surface_edge_mm": edge, "size_mm": size, "envelope": case.mesh.envelope,
+        "surface_edge_mm": edge, "size_mm": size, "envelope": spec.mesh.envelope,
         "tetwild_seconds": seconds, "tetwild_background_tets": int(len(tets)),
         "repairs": outer.repairs, "surface_file": str(path),
     }
@@ -169,16 +207,16 @@ def _build(case, path: Path, size: float, console: Console) -> tuple[dict, dict]
     return arrays, {"frame": frame.as_dict(), "stats": stats}
 
 
-def _finish(case, size: float, arrays: dict, meta: dict, console: Console) -> tuple[dict, dict]:
+def _finish(spec: FemurSpec, size: float, arrays: dict, meta: dict) -> tuple[dict, dict]:
     """The TetWild stage's mesh refined at the drill site (if asked), its quality and statistics."""
     from femstudy.meshing import tetra
     from femstudy.meshing.tetra import signed_volumes
 
     mesh = TetMesh(arrays["points"], arrays["tets"].astype(np.int64), arrays["region"].astype(np.int8))
     frame = Frame.from_dict(meta["frame"])
-    if case.mesh.refine == "site":
-        mesh = _refine_site(mesh, frame, case, size)
-        console.progress(f"refined the drill site to {min(case.mesh.site_size_mm, size):g} mm: {mesh.n_tets} tets")
+    if spec.mesh.refine == "site":
+        mesh = _refine_site(mesh, frame, spec, size)
+        log.info("refined the drill site to %g mm: %d tets", min(spec.mesh.site_size_mm, size), mesh.n_tets)
     vol = signed_volumes(mesh.points, mesh.tets)
     per_region = {REGION_NAMES[r]: {"tets": int((mesh.region == r).sum()), "volume_mm3": float(vol[mesh.region == r].sum())}
                   for r in REGION_NAMES}
@@ -193,16 +231,17 @@ def _finish(case, size: float, arrays: dict, meta: dict, console: Console) -> tu
     return arrays, {"frame": meta["frame"], "quality": tetra.quality(mesh), "stats": stats}
 
 
-def _refine_site(mesh: TetMesh, frame: Frame, case, size: float) -> TetMesh:
-    """Bisect tets around the drill site's entry point down to ``mesh.site_size_mm``."""
+def _refine_site(mesh: TetMesh, frame: Frame, spec: FemurSpec, size: float) -> TetMesh:
+    """Bisect tets around the drill site's entry point down to ``mesh.site_size_mm``, over a
+    core of twice the drill radius."""
     from femstudy.meshing import refine
 
     outer = landmarks.outer_faces(mesh, frame)
-    centre = landmarks.section_centre(mesh.points, outer, frame, case.site.position)
-    entry, _ = landmarks.entry_point(mesh.points[outer], frame, case.site, centre)
-    h_site = min(case.mesh.site_size_mm, size)
-    target = refine.site_target(entry, size, h_site, max(case.mesh.site_radius_mm, 2 * h_site),
-                                core_mm=max(2 * landmarks.DRILL_RADIUS_MM, h_site))
+    centre = landmarks.section_centre(mesh.points, outer, frame, spec.site.position)
+    entry, _ = landmarks.entry_point(mesh.points[outer], frame, spec.site, centre)
+    h_site = min(spec.mesh.site_size_mm, size)
+    target = refine.site_target(entry, size, h_site, max(spec.mesh.site_radius_mm, 2 * h_site),
+                                core_mm=max(2 * spec.drill_radius_mm, h_site))
     return refine.refine(mesh, target)
 
 
@@ -210,8 +249,9 @@ def _simplified(poly, edge_mm: float):
     """Decimate a level-set surface to triangles of about ``edge_mm``."""
     if poly.n_cells == 0:
         return poly
-    if not poly.is_all_triangles:
+    if not poly.is_all_triangles:  # polygons, and stray lines or vertices a contour may leave
         poly = poly.triangulate()
+        poly.lines, poly.verts = np.empty(0, np.int64), np.empty(0, np.int64)
     target = poly.area / (np.sqrt(3) / 4 * edge_mm ** 2)
     if target < 0.8 * poly.n_cells:
         poly = poly.decimate(1.0 - max(target, 50) / poly.n_cells, volume_preservation=True)

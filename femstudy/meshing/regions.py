@@ -263,4 +263,6 @@ def level_surface(fields: RegionFields, name: str, clip_by: str | None = None, c
         surf[clip_by] = fields.sample(clip_by, surf.points)
         surf = surf.clip_scalar(scalars=clip_by, value=clip_above, invert=False)
         surf = surf.extract_surface(algorithm=None)
-    return surf.triangulate().clean()
+    # contour points on grid nodes give collapsed triangles: drop them rather than keep them
+    # as lines and points, which quadric decimation refuses (the LHDL CT femur has four)
+    return surf.triangulate().clean(polys_to_lines=False, lines_to_points=False)

@@ -73,7 +73,7 @@ def summary_text(model) -> str:
         "(min / median / max)",
         f"site      {s.name}: entry {np.round(s.entry_point, 2).tolist()} mm, drill direction "
         f"{np.round(s.direction, 3).tolist()}, cortex {s.cortical_thickness_mm:.2f} mm along the drill axis",
-        f"          {st['site_facets_in_drill_disk']} boundary facets in the r = 1.35 mm load disk, "
+        f"          {st['site_facets_in_drill_disk']} boundary facets in the r = {st['drill_radius_mm']:g} mm load disk, "
         f"median edge there {st['site_edge_mm']:.2f} mm",
         f"clamps    {int(model.clamps.proximal.sum())} proximal and {int(model.clamps.distal.sum())} distal "
         "surface nodes",
@@ -161,7 +161,7 @@ def cut_picture(model, path: Path) -> None:
     plotter.subplot(0, 4)
     entries = [(REGION_NAMES[c].replace("_", " "), colours[c]) for c in codes if c]
     entries += [("canal wall (the canal is empty)", colours[0]), ("drill axis", "black"),
-                ("load disk, r = 1.35 mm", "#1f4fd0")]
+                (f"load disk, r = {model.stats['drill_radius_mm']:g} mm", "#1f4fd0")]
     for k, (label, colour) in enumerate(entries):
         plotter.add_text(label, position=(0.04, 0.62 - 0.045 * k), viewport=True, font_size=11, color=colour)
     plotter.subplot(0, 2)
@@ -180,13 +180,14 @@ def cut_picture(model, path: Path) -> None:
     outer = pv.PolyData.from_regular_faces(model.mesh.points, landmarks.outer_faces(model.mesh, f))
     plotter.add_mesh(outer.clip_box(np.repeat(entry, 2) + np.tile([-8.0, 8.0], 3), invert=False),
                      color=REGION_COLOURS[CORTICAL], show_edges=True, edge_color="#444444", line_width=0.8)
-    ring = pv.Circle(radius=landmarks.DRILL_RADIUS_MM, resolution=60)
+    radius = model.stats["drill_radius_mm"]
+    ring = pv.Circle(radius=radius, resolution=60)
     normal = s.outward_normal
     ring.points = _in_plane(ring.points, entry + 0.05 * normal, normal)
     plotter.add_mesh(ring.extract_feature_edges(boundary_edges=True, feature_edges=False, manifold_edges=False),
                      color="#1f4fd0", line_width=4)
     plotter.add_text(f"outer surface at the drill site\n{model.stats['site_facets_in_drill_disk']} facets in "
-                     "the r = 1.35 mm load disk", font_size=10, color="black")
+                     f"the r = {radius:g} mm load disk", font_size=10, color="black")
     plotter.add_text("view height 12 mm", position="lower_left", font_size=8, color="black")
     plotter.camera.focal_point = entry
     plotter.camera.position = entry + normal * 200

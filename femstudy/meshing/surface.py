@@ -52,6 +52,45 @@ class Surface:
         return Surface(self.points * factor, self.triangles, self.source, list(self.repairs))
 
 
+def surface_samples(points: np.ndarray, triangles: np.ndarray, per_extent: int = 80):
+    """Centres, unit outward normals and areas of a closed surface's triangles.
+
+    Triangles longer than 1/``per_extent`` of the bone are first subdivided, so that every
+    slice along the bone holds samples even on a coarse triangulation (a CAD export with long
+    slivers, say). Normals point outwards whichever way the triangles are wound: they are
+    flipped if the enclosed volume Σ x0 · (x1 × x2) / 6 comes out negative.
+
+    Parameters
+    ----------
+    points, triangles
+        The surface: (n, 3) coordinates and (m, 3) vertex indices.
+
+    Returns
+    -------
+    centres (k, 3), normals (k, 3), areas (k,)
+
+    Example
+    -------
+    >>> import pyvista as pv
+    >>> box = pv.Box().triangulate()
+    >>> x, n, a = surface_samples(np.asarray(box.points), box.regular_faces)
+    >>> round(float(a.sum()), 6), bool((np.einsum("ij,ij->i", x, n) > 0).all())
+    (24.0, True)
+    """
+    import pyvista as pv
+
+    extent = float(np.ptp(points, axis=0).max())
+    v = points[triangles]
+    outward = np.sign(np.einsum("ij,ij->i", v[:, 0], np.cross(v[:, 1], v[:, 2])).sum()) or 1.0
+    if np.linalg.norm(v - np.roll(v, 1, axis=1), axis=2).max() > extent / per_extent:
+        fine = pv.PolyData.from_regular_faces(points, triangles).subdivide_adaptive(max_edge_len=extent / per_extent)
+        v = np.asarray(fine.points, float)[fine.regular_faces]
+    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    twice_area = np.linalg.norm(cross, axis=1)
+    normals = outward * cross / np.maximum(twice_area, np.finfo(float).tiny)[:, None]
+    return v.mean(axis=1), normals, 0.5 * twice_area
+
+
 def file_digest(path: Path) -> str:
     """SHA-256 of a file's bytes."""
     h = hashlib.sha256()
@@ -61,51 +100,147 @@ def file_digest(path: Path) -> str:
     return h.hexdigest()
 
 
+def check_surface_file(path: Path) -> None:
+    """Raise :class:`UserError` unless ``path`` is a readable, non-empty file of a known format.
+
+    Example
+    -------
+    >>> check_surface_file(Path("/"))
+    Traceback (most recent call last):
+    femstudy.errors.UserError: / is a folder, not a surface file
+    """
+    if path.is_dir():
+        inside = sorted(p.name for p in path.iterdir() if p.suffix.lower() in SUFFIXES)
+        hint = f" (it holds {', '.join(inside[:3])}{', ...' if len(inside) > 3 else ''}: name one of them)" if inside else ""
+        raise UserError(f"{path} is a folder, not a surface file{hint}")
+    require(path.exists(), f"surface file {path} does not exist")
+    require(path.is_file(), f"surface file {path} is not a regular file")
+    try:
+        with open(path, "rb") as fh:
+            fh.read(1)
+    except OSError as exc:
+        raise UserError(f"cannot read surface file {path}: {exc.strerror or exc}") from None
+    require(path.stat().st_size > 0, f"surface file {path} is empty")
+    require(path.suffix.lower() in SUFFIXES,
+            f"surface file {path} has an unknown format '{path.suffix}' (use one of {', '.join(SUFFIXES)})")
+
+
+def _check_stl_complete(path: Path) -> None:
+    """Refuse an STL file that stops early (VTK would read the part that is there and report
+    holes, or nothing). A binary STL is an 80-byte header, a 4-byte triangle count n and n
+    records of 50 bytes; an ASCII one starts with "solid" and ends with "endsolid"."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(512)
+        fh.seek(max(size - 512, 0))
+        tail = fh.read()
+    announced = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
+    if 84 + 50 * announced == size:
+        return
+    if head[:5].lower() == b"solid":
+        if b"endsolid" not in tail.lower():
+            raise UserError(f"cannot read surface file {path}: the ASCII STL is cut short (it does not end with 'endsolid')")
+        return
+    if len(head) < 84:
+        raise UserError(f"cannot read surface file {path}: at {size} bytes it is too short to be an STL file")
+    if 84 + 50 * announced > size:
+        held = max(size - 84, 0) // 50
+        raise UserError(f"cannot read surface file {path}: it is cut short or not an STL file (it holds {held:,} "
+                        f"of the {announced:,} triangles its binary STL header announces)")
+
+
 def _read_any(path: Path):
-    """Read ``path`` into a PolyData of its outer faces, or raise UserError."""
+    """Read ``path`` into a PolyData of its outer faces, or raise UserError.
+
+    VTK reads it, and meshio when VTK fails or finds nothing; the first complaint is the
+    one reported. PLY goes to meshio alone: VTK's PLY reader crashes the process on a
+    truncated binary file.
+    """
     import logging
     import warnings
 
     import pyvista as pv
 
-    try:
-        with pv.vtk_verbosity("off"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            logging.disable(logging.CRITICAL)  # VTK reader errors are reported below, in one line
-            try:
-                mesh = pv.read(path)
-            finally:
-                logging.disable(logging.NOTSET)
-    except Exception as exc:  # VTK readers raise many types; fall back to meshio once
+    if path.suffix.lower() == ".stl":
+        _check_stl_complete(path)
+    mesh, complaint = None, ""
+    if path.suffix.lower() != ".ply":
         try:
-            import meshio
-
-            m = meshio.read(path)
-            cells = [c for c in m.cells if c.type in ("triangle", "quad", "polygon")]
-            if not cells:
-                raise UserError(f"surface file {path} holds no triangles or polygons") from None
-            faces = np.hstack([np.column_stack([np.full(len(c.data), c.data.shape[1]), c.data]).ravel()
-                               for c in cells])
-            mesh = pv.PolyData(np.asarray(m.points, float)[:, :3], faces)
+            with pv.vtk_verbosity("off"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                logging.disable(logging.CRITICAL)  # VTK reader errors are reported below, in one line
+                try:
+                    mesh = pv.read(path)
+                finally:
+                    logging.disable(logging.NOTSET)
+        except Exception as exc:  # VTK readers raise many types
+            complaint = _first_line(exc)
+    if (mesh is None or mesh.n_cells == 0) and path.suffix.lower() in MESHIO_READERS:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                mesh = _read_meshio(path)
         except UserError:
             raise
-        except Exception:
-            raise UserError(f"cannot read surface file {path}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
-                            f" (readable formats: {', '.join(SUFFIXES)})") from None
+        except Exception as exc:  # meshio's readers raise many types too
+            complaint = complaint or _first_line(exc)
+    if mesh is None:
+        raise UserError(f"cannot read surface file {path}: {complaint} "
+                        f"(is it a complete {path.suffix.lstrip('.').upper()} file?)")
     if isinstance(mesh, pv.MultiBlock):
         mesh = mesh.combine()
     if not isinstance(mesh, pv.PolyData):
         mesh = mesh.extract_surface(algorithm=None)
+    if mesh.n_cells == 0 and complaint:
+        raise UserError(f"cannot read surface file {path}: {complaint}")
     return mesh
 
 
-def read_surface(path: str | Path) -> Surface:
-    """Read, clean and check a closed surface file; raise :class:`UserError` if unusable."""
+#: meshio's reader of each format it shares with VTK (called directly: ``meshio.read`` exits
+#: the process when a reader fails)
+MESHIO_READERS = {".stl": "stl", ".obj": "obj", ".ply": "ply", ".vtk": "vtk", ".vtu": "vtu", ".off": "off"}
+
+
+def _first_line(exc: Exception) -> str:
+    return str(exc).splitlines()[0] if str(exc).strip() else type(exc).__name__
+
+
+def _read_meshio(path: Path):
+    """``path`` read by meshio, as a PolyData of its triangles and polygons."""
+    import meshio
+    import pyvista as pv
+
+    m = getattr(meshio, MESHIO_READERS[path.suffix.lower()]).read(str(path))
+    cells = [c for c in m.cells if c.type in ("triangle", "quad", "polygon")]
+    if not cells:
+        raise UserError(f"surface file {path} holds no triangles or polygons")
+    faces = np.hstack([np.column_stack([np.full(len(c.data), c.data.shape[1]), c.data]).ravel() for c in cells])
+    return pv.PolyData(np.asarray(m.points, float)[:, :3], faces)
+
+
+def read_surface(path: str | Path, bodies: str = "one") -> Surface:
+    """Read, clean and check a closed surface file; raise :class:`UserError` if unusable.
+
+    Parameters
+    ----------
+    path
+        STL, OBJ, PLY, VTP, VTK, VTU or OFF file.
+    bodies
+        ``"one"`` refuses a file holding several separate bodies (naming their sizes);
+        ``"largest"`` keeps the one with the largest area and says so in ``repairs``.
+
+    Returns
+    -------
+    Surface
+
+    Example
+    -------
+    >>> from femstudy.meshing.builtin_femur import BUILTIN_STL
+    >>> len(read_surface(BUILTIN_STL).triangles)
+    12000
+    """
     path = Path(path)
-    require(path.is_file(), f"surface file {path} does not exist")
-    require(path.stat().st_size > 0, f"surface file {path} is empty")
-    require(path.suffix.lower() in SUFFIXES,
-            f"surface file {path} has an unknown format '{path.suffix}' (use one of {', '.join(SUFFIXES)})")
+    check_surface_file(path)
     mesh = _read_any(path)
     require(mesh.n_points > 0 and mesh.n_cells > 0,
             f"cannot read surface file {path}: no triangles in it (is it a valid {path.suffix.lstrip('.').upper()} file?)")
@@ -113,16 +248,19 @@ def read_surface(path: str | Path) -> Surface:
     extent = np.ptp(np.asarray(mesh.points, float), axis=0)
     require(extent.min() > 1e-6 * extent.max(),
             f"surface file {path} is a flat (2-D) mesh; give the closed outer surface of the bone")
-    return prepare(mesh, str(path))
+    return prepare(mesh, str(path), bodies)
 
 
-def prepare(mesh, source: str) -> Surface:
-    """Triangulate, clean, check closed/manifold/single shell and orient outwards."""
+def prepare(mesh, source: str, bodies: str = "one") -> Surface:
+    """Triangulate, clean, keep one body, check closed/manifold and orient outwards.
+
+    ``bodies``: ``"one"`` refuses several separate bodies, ``"largest"`` keeps the largest.
+    """
     repairs: list[str] = []
     if not mesh.is_all_triangles:
         mesh = mesh.triangulate()
         repairs.append("split polygons into triangles")
-    n_points, n_cells = mesh.n_points, mesh.n_cells
+    n_points = mesh.n_points
     mesh = mesh.clean(tolerance=1e-9, absolute=False)
     if mesh.n_points < n_points:
         repairs.append(f"merged {n_points - mesh.n_points} duplicate points")
@@ -132,10 +270,10 @@ def prepare(mesh, source: str) -> Surface:
     if dropped:
         repairs.append(f"removed {dropped} degenerate or duplicate triangles")
     require(len(tri) >= 4, f"{source}: fewer than 4 valid triangles; not a closed surface")
+    tri, note = _one_body(pts, tri, source, bodies)
+    if note:
+        repairs.append(note)
     _check_closed_manifold(tri, source)
-    shells = _count_shells(tri, len(pts))
-    require(shells == 1, f"{source}: the surface has {shells} separate shells; give one closed outer "
-                         "surface of the bone (remove loose fragments or inner surfaces first)")
     used = np.unique(tri)
     if len(used) < len(pts):
         remap = np.full(len(pts), -1)
@@ -154,6 +292,27 @@ def prepare(mesh, source: str) -> Surface:
         surf.triangles = surf.triangles[:, ::-1].copy()
         repairs.append("turned inward-facing triangles outwards")
     return surf
+
+
+def _one_body(pts, tri, source, bodies) -> tuple[np.ndarray, str]:
+    """The triangles of the only body, or of the largest (by area) with ``bodies = "largest"``,
+    and a note of what was dropped. Bodies are sets of triangles connected through shared
+    vertices; a femur exported with its patella, or with loose fragments, has several."""
+    labels = _body_labels(tri, len(pts))
+    count = int(labels.max()) + 1
+    if count == 1:
+        return tri, ""
+    v = pts[tri]
+    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    order = np.argsort(np.bincount(labels, weights=area))[::-1]
+    sizes = [(int((labels == b).sum()), float(np.ptp(pts[np.unique(tri[labels == b])], axis=0).max())) for b in order]
+    listed = ", ".join(f"{n:,} triangles spanning {extent:.3g}" for n, extent in sizes[:3])
+    more = f" and {count - 3} smaller" if count > 3 else ""
+    if bodies != "largest":
+        raise UserError(f"{source}: the surface has {count} separate shells (bodies: {listed}{more}, in the file's units); "
+                        "set geometry.bodies = \"largest\" to mesh the largest alone, or remove the others (loose "
+                        "fragments, a patella, inner surfaces) in a mesh editor")
+    return tri[labels == order[0]], f"kept the largest of {count} bodies ({listed}{more})"
 
 
 def _drop_degenerate_and_duplicate(pts, tri):
@@ -181,15 +340,16 @@ def _check_closed_manifold(tri, source):
                        "triangles); repair it in a mesh editor first")
 
 
-def _count_shells(tri, n_points):
+def _body_labels(tri, n_points) -> np.ndarray:
+    """Body number (0, 1, ...) of every triangle: its connected component through shared vertices."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     e = _edges(tri)
     graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_points, n_points))
-    used = np.unique(tri)
     _, labels = connected_components(graph, directed=False)
-    return len(np.unique(labels[used]))
+    _, body = np.unique(labels[tri[:, 0]], return_inverse=True)
+    return body.ravel()
 
 
 def _orient_consistently(tri):

@@ -1,4 +1,5 @@
-"""A synthetic calibration data set shaped like the thesis's (§4.1.1, §5.1–5.2).
+"""Synthetic recordings written to files: one recording, or a calibration data set shaped
+like the thesis's (§4.1.1, §5.1–5.2).
 
 Five calibration conditions (Table 4-1) × ``replicates`` runs and two validation conditions
 (Table 5-3) × ``validation_replicates`` runs. Each run draws its own friction and initial
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import io
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,10 +29,13 @@ import numpy as np
 
 from femstudy import atomic
 from femstudy.drilling.friction import BoneSet, load_bone_set
-from femstudy.recordings.reader import Recording, write_recording
+from femstudy.errors import require
+from femstudy.recordings.reader import FORMAT_SUFFIXES, Recording, write_recording
 from femstudy.recordings.synthetic import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, synthesize
 
 #: Table 4-1 calibration conditions and Table 5-3 validation conditions, (f [mm/s], N [rpm]).
+log = logging.getLogger(__name__)
+
 CALIBRATION_CONDITIONS = ((1.0, 1000.0), (1.5, 1100.0), (1.5, 1250.0), (1.75, 1500.0), (2.0, 1500.0))
 VALIDATION_CONDITIONS = ((1.75, 1250.0), (2.0, 1000.0))
 #: (model, μ_f factor, μ_w factor, reason) of the planted outlier runs, used in turn. Each is
@@ -110,27 +115,52 @@ TRUTH_COLUMNS = ["file", "role", "feed_mm_s", "spindle_rpm", "replicate", "condi
                  "outlier", "outlier_reason"]
 
 
-def write_dataset(folder, bone: str = "bovine", replicates: int = 10, outliers: int = 3, seed: int = 0,
-                  sample_rate_hz: float = 1000.0, torque_unit: str = "Nmm", progress=None) -> str:
-    """Write the data set (atomically, as a whole folder) and return a summary to print.
+def write_dataset(folder, bone: str | BoneSet = "bovine", replicates: int = 10, outliers: int = 3, seed: int = 0,
+                  sample_rate_hz: float = 1000.0, torque_unit: str = "Nmm", format: str | None = None) -> str:
+    """Write a synthetic calibration data set (atomically, as a whole folder); return a summary.
 
-    Layout: ``calibration/*.csv``, ``validation/*.csv``, ``truth.csv`` (per-run ground truth)
-    and ``generating_bone_set.toml`` (the power law the runs were drawn around).
+    Parameters
+    ----------
+    folder : path-like
+        Written as ``calibration/*.csv``, ``validation/*.csv`` (or the suffix of ``format``),
+        ``truth.csv`` (per-run ground truth) and ``generating_bone_set.toml`` (the power law the
+        runs were drawn around).
+    bone : str or BoneSet
+        The bone set the runs' friction is drawn around.
+    replicates, outliers, seed : int
+        Runs per condition, planted outlier runs, random seed.
+    sample_rate_hz : float
+    torque_unit : {"Nmm", "Nm"}
+    format : str, optional
+        One of :data:`~femstudy.recordings.reader.WRITE_FORMATS` (default: CSV).
+
+    Returns
+    -------
+    str
+        What was written and how to calibrate on it.
+
+    Examples
+    --------
+    >>> print(write_dataset("demo", replicates=4))   # doctest: +SKIP
     """
-    bone_set = load_bone_set(bone)
+    require(replicates >= 1, f"--replicates must be at least 1, got {replicates}")
+    require(format is None or format in FORMAT_SUFFIXES,
+            f"unknown recording format '{format}'; choose one of {', '.join(FORMAT_SUFFIXES)}")
+    bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
     runs = dataset_recordings(bone_set, replicates=replicates, outliers=outliers, seed=seed,
                               sample_rate_hz=sample_rate_hz)
     truth = io.StringIO()
     writer = csv.writer(truth, lineterminator="\n")
     writer.writerow(TRUTH_COLUMNS)
     with atomic.atomic_folder(folder) as tmp:
+        suffix = FORMAT_SUFFIXES[format or "csv"]
         for k, (relative, rec) in enumerate(runs):
-            write_recording(tmp / relative, rec, torque_unit=torque_unit)
+            relative = str(Path(relative).with_suffix(suffix))
+            write_recording(tmp / relative, rec, torque_unit, format=format or "csv")
             m = rec.metadata
             writer.writerow([relative] + [m[c] if not isinstance(m[c], float) else f"{m[c]:.6g}"
                                           for c in TRUTH_COLUMNS[1:]])
-            if progress and (k + 1) % 10 == 0:
-                progress(f"synthesised {k + 1}/{len(runs)} runs")
+            log.info("synthesised %d/%d runs", k + 1, len(runs), extra={"progress": ("runs", k + 1, len(runs))})
         atomic.write_text(tmp / "truth.csv", truth.getvalue())
         atomic.write_text(tmp / "generating_bone_set.toml", bone_set.to_toml())
     n_val = sum(r[0].startswith("validation") for r in runs)
@@ -141,3 +171,47 @@ def write_dataset(folder, bone: str = "bovine", replicates: int = 10, outliers: 
             f"'{bone_set.name}'; ground truth in {folder / 'truth.csv'}\n"
             f"calibrate with: femstudy calibrate {folder / 'calibration'} --validate {folder / 'validation'} "
             f"--name NAME")
+
+
+def write_synthetic(path, *, format: str | None = None, time_unit: str = "s", force_unit: str = "N",
+                    torque_unit: str = "Nmm", plot=None, **conditions) -> str:
+    """Synthesise one recording, write it (and optionally its figure); return a summary line.
+
+    Parameters
+    ----------
+    path : path-like
+        The recording to write; the format comes from ``format``, else the suffix.
+    format : str, optional
+        One of :data:`~femstudy.recordings.reader.WRITE_FORMATS`.
+    time_unit, force_unit, torque_unit : str
+        Units of the written columns (e.g. "ms", "kN", "N*m"); the values are converted.
+    plot : path-like, optional
+        Also draw the recording (.png, .pdf or .svg).
+    **conditions
+        Passed to :func:`~femstudy.recordings.synthetic.synthesize` (feed, speed, effects ...).
+
+    Returns
+    -------
+    str
+        What was written, with the ground truth (μ_f, μ_w, F_o) and the effects.
+
+    Examples
+    --------
+    >>> print(write_synthetic("run.tdms", feed_mm_s=1.5, spindle_rpm=1500))   # doctest: +SKIP
+    """
+    from dataclasses import replace
+
+    require(plot is None or Path(plot).suffix.lower() in (".png", ".pdf", ".svg"),
+            f"--plot must end in .png, .pdf or .svg, got '{plot}'")
+    rec = synthesize(**conditions)
+    write_recording(path, rec, torque_unit, format=format, time_unit=time_unit, force_unit=force_unit)
+    m = rec.metadata
+    summary = (f"wrote {path}: {rec.time_s.size} samples, {rec.duration_s:.2f} s; model {m['model']}, "
+               f"mu_f = {m['true_mu_f']:.4f}, mu_w = {m['true_mu_w']:.4f}, F_o = {m['true_initial_force_N']:.2f} N; "
+               f"effects: {', '.join(m['effects']) or 'none'}")
+    if plot is not None:
+        from femstudy.recordings.figures import plot_recording
+
+        plot_recording(plot, replace(rec, source=str(path)))
+        summary += f"\nwrote {plot}"
+    return summary

@@ -26,10 +26,11 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
+from femstudy import thesis
 from femstudy.errors import require
 
 #: Table 4-4: feed [mm/s] -> stop frequency [Hz] (pass frequency 0.05 Hz, sampling 500 Hz).
-TABLE_4_4_STOP_HZ = {1.0: 2.2, 1.5: 2.0, 1.75: 1.9, 2.0: 1.8}
+TABLE_4_4_STOP_HZ = thesis.TABLE_4_4_STOP_HZ
 PASS_HZ = 0.05
 ORDER = 4
 STOP_ATTENUATION_DB = 40.0

@@ -205,8 +205,8 @@ def isolate(time_s: np.ndarray, thrust_N: np.ndarray, torque_Nmm: np.ndarray | N
     if torque_Nmm is not None and np.any(free):
         q = smooth(torque_Nmm)
         torque_coef, _ = _baseline(t, q, free, floor=1e-6 * (float(np.ptp(q)) or 1.0))
-    hint = (f"; give the times as contact_s and cut_end_s in its header (or --set contact_s=... "
-            f"cut_end_s=...)")
+    hint = ("; give the times as contact_s and cut_end_s in its header (or --set contact_s=... "
+            "cut_end_s=...)")
 
     if contact_s is None or cut_end_s is None:
         peak = float(np.max(d))

@@ -26,11 +26,12 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from importlib import resources
+from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
-from femstudy.errors import require
+from femstudy.errors import UserError, require
 
 BIN_EDGES = (-np.inf, -2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0, np.inf)
 CONFIDENCE = 0.95
@@ -156,3 +157,58 @@ def appendix_b() -> tuple[np.ndarray, np.ndarray]:
     rows = list(csv.DictReader(line for line in text.splitlines() if line and not line.startswith("#")))
     return (np.array([float(r["growth_exponent_p"]) for r in rows]),
             np.array([float(r["initial_force_N"]) for r in rows]))
+
+
+def read_trials(path) -> tuple[list[float], list[float]]:
+    """(p, F_o) from a CSV; rows whose 'role' is outlier or validation are skipped."""
+    import csv
+
+    try:
+        lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    rows = list(csv.DictReader(lines))
+    require(rows and {"initial_force_N", "growth_exponent_p"} <= set(rows[0]),
+            f"{path} needs columns initial_force_N and growth_exponent_p")
+    rows = [r for r in rows if r.get("role", "calibration") in ("calibration", "held out")]
+    try:
+        return [float(r["growth_exponent_p"]) for r in rows], [float(r["initial_force_N"]) for r in rows]
+    except ValueError as exc:
+        raise UserError(f"{path}: {exc}") from None
+
+
+def normality_study(trials=None, plot_path=None) -> str:
+    """Chi-square (Tables 4-2/4-3 method), Shapiro–Wilk and median-rank plots of F_o and p.
+
+    Parameters
+    ----------
+    trials : path-like, optional
+        CSV with columns initial_force_N and growth_exponent_p (e.g. runs.csv of a
+        calibration); default the thirty trials of Appendix B (Table B-1).
+    plot_path : path-like, optional
+        Write the probability plots (PNG/PDF/SVG).
+
+    Returns
+    -------
+    str
+        The tables, as ``femstudy normality`` prints them.
+    """
+    require(plot_path is None or str(plot_path).lower().endswith((".png", ".pdf", ".svg")),
+            f"--plot must end in .png, .pdf or .svg, got '{plot_path}'")
+    if trials is None:
+        p, F = appendix_b()
+        source = "thesis Appendix B, Table B-1 (30 bovine trials, f = 1.5 mm/s, N = 1500 rpm)"
+        titles = ("Table 4-2: chi-square test for normality, initial cutting force F_o",
+                  "Table 4-3: chi-square test for normality, growth exponent p")
+    else:
+        p, F = read_trials(Path(trials))
+        source = str(trials)
+        titles = ("Chi-square test for normality, initial cutting force F_o",
+                  "Chi-square test for normality, growth exponent p")
+    results = {"initial cutting force F_o [N]": normality("F_o [N]", F), "growth exponent p [-]": normality("p", p)}
+    if plot_path:
+        from femstudy.recordings.figures import plot_normality
+
+        plot_normality(plot_path, results)
+    return "\n".join([f"normality of {len(F)} trials from {source}\n"]
+                     + [format_normality(res, title) + "\n" for title, res in zip(titles, results.values())]).rstrip()

@@ -18,6 +18,7 @@ runs' own mean friction, the geometric mean by −0.7 % (rms 4.2 %).
 
 from __future__ import annotations
 
+import logging
 from collections import defaultdict
 from dataclasses import dataclass, field
 
@@ -31,6 +32,8 @@ from femstudy.recordings.calibration import (FrictionFit, Validation, cortical_e
                                              outlier_reasons, power_law_set, r_squared, validate)
 from femstudy.recordings.normality import NormalityResult, normality
 from femstudy.recordings.processing import ProcessedRun
+
+log = logging.getLogger(__name__)
 
 TRUTH_KEYS = ("true_mu_f", "true_mu_w", "condition_mu_f", "condition_mu_w")
 
@@ -94,6 +97,10 @@ class ConditionResult:
 
 @dataclass
 class CalibrationResult:
+    """The calibration of a bone set: every run's fit and role, each condition's friction,
+    the power law (``bone``, a :class:`~femstudy.drilling.friction.BoneSet`), normality of
+    F_o and p, and the neuron study; ``files`` lists what was written where, when anything was."""
+
     runs: list[RunResult]
     conditions: list[ConditionResult]
     bone: BoneSet
@@ -101,9 +108,23 @@ class CalibrationResult:
     normality: dict[str, NormalityResult] = field(default_factory=dict)
     ann: ann_module.NeuronStudy | None = None
     notes: list[str] = field(default_factory=list)
+    files: dict = field(default_factory=dict)
 
     def by_role(self, *roles: str) -> list[RunResult]:
         return [r for r in self.runs if r.role in roles]
+
+    def table(self) -> list[dict]:
+        """One row per condition: feed [mm/s], speed [rpm], runs used, μ_f and μ_w."""
+        return [{"feed_mm_s": c.feed_mm_s, "spindle_rpm": c.spindle_rpm, "runs": len(c.runs_used),
+                 "mu_f": c.mu_f, "mu_w": c.mu_w} for c in self.conditions]
+
+    def to_json(self) -> dict:
+        """Conditions, power-law coefficients, runs (name, role, μ_f, μ_w, outlier reason), files."""
+        return {"bone_set": self.bone.name, "conditions": self.table(),
+                "power_law": {"a": [float(x) for x in self.bone.a], "b": [float(x) for x in self.bone.b]},
+                "runs": [{"run": r.name, "role": r.role, "mu_f": r.fit.mu_f, "mu_w": r.fit.mu_w,
+                          "outlier_reason": r.outlier_reason} for r in self.runs],
+                "files": {k: str(v) for k, v in self.files.items()}}
 
 
 def _truth(runs: list[ProcessedRun], key: str) -> float | None:
@@ -114,8 +135,8 @@ def _truth(runs: list[ProcessedRun], key: str) -> float | None:
 
 def calibrate(calibration: list[ProcessedRun], validation: list[ProcessedRun] = (), name: str = "calibrated",
               holdout: int = 2, neurons: range | None = range(1, 11), seed: int = 0,
-              progress=lambda message: None) -> CalibrationResult:
-    """Run the whole calibration (see the module docstring)."""
+              ) -> CalibrationResult:
+    """Run the whole calibration (see the module docstring) on processed runs."""
     require(len(calibration) > 0, "no calibration runs given")
     drill = calibration[0].drill
     for run in list(calibration) + list(validation):
@@ -136,7 +157,7 @@ def calibrate(calibration: list[ProcessedRun], validation: list[ProcessedRun] = 
         F0, p = fit_growth(data)
         results[run.name] = RunResult(run, "calibration" if k < len(calibration) else "validation",
                                       fit_friction([data]), F0, p)
-    progress(f"fitted friction to {len(results)} runs one by one")
+    log.info("fitted friction to %d runs one by one", len(results))
 
     rng = np.random.default_rng(seed)
     conditions = []
@@ -157,7 +178,7 @@ def calibrate(calibration: list[ProcessedRun], validation: list[ProcessedRun] = 
         conditions.append(ConditionResult(cond[0], cond[1], used, [results[n].fit.mu_f for n in used],
                                           [results[n].fit.mu_w for n in used], fit_friction([fitted[n] for n in used]),
                                           _truth(members, "condition_mu_f"), _truth(members, "condition_mu_w")))
-    progress(f"pooled {len(conditions)} conditions")
+    log.info("pooled %d conditions", len(conditions))
 
     u1 = [cortical_energy_MPa(results[n].fit.initial_force_N[0], results[n].run.feed_mm_s,
                               results[n].run.spindle_rpm, drill) for c in conditions for n in c.runs_used]
@@ -192,7 +213,7 @@ def calibrate(calibration: list[ProcessedRun], validation: list[ProcessedRun] = 
             X, Y = ann_module.run_inputs(fitted[r.name])
             P = best.predict(X)
             r.ann_r2 = (r_squared(Y[:, 0], P[:, 0]), r_squared(Y[:, 1], P[:, 1]))
-        progress(f"trained networks of {result.ann.neurons[0]}-{result.ann.neurons[-1]} hidden neurons")
+        log.info("trained networks of %d-%d hidden neurons", result.ann.neurons[0], result.ann.neurons[-1])
     elif not held:
         result.notes.append("no held-out runs (give --validate or keep --holdout > 0 with at least five runs "
                             "per condition): no validation R² and no neural network")

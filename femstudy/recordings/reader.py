@@ -1,75 +1,67 @@
-"""The one reader (and writer) of force/torque recordings.
+"""The one reader (and writer) of force/torque recordings, whatever file they come in.
 
-A recording is a CSV file. Optional metadata come first as comment lines ``# key = value``
-whose values are TOML (``# feed_mm_s = 1.5``, ``# specimen = "bovine femur 3"``); other
-comment lines are free text. The first non-comment line names the columns, each with its
-unit: ``time_s`` and ``thrust_N`` are required; ``torque_Nmm`` or ``torque_Nm`` (converted
-to N·mm, ×1000), ``depth_mm``, ``fx_N`` and ``fy_N`` are optional; unknown columns are
-ignored. Sampling between 100 Hz and 10 kHz, uneven sampling allowed.
+:func:`read_recording` takes femstudy's CSV and what acquisition software writes: delimited
+text with ``,``, ``;`` or tab, a decimal comma, a byte-order mark, CRLF line ends, a
+Kistler-like header block and units row (:mod:`~femstudy.recordings.formats.text`); NI TDMS
+(:mod:`~femstudy.recordings.formats.tdms`); MATLAB .mat, v7.3 included
+(:mod:`~femstudy.recordings.formats.matlab`); Excel .xlsx
+(:mod:`~femstudy.recordings.formats.excel`). The format is told from the file's first bytes,
+then its name. Columns are found by name and unit (:mod:`~femstudy.recordings.columns`) and
+converted to s, N, N·mm and mm through pint (:mod:`~femstudy.recordings.units`); metadata
+are checked against one schema (:mod:`~femstudy.recordings.metadata`).
 
-Required metadata: ``feed_mm_s`` and ``spindle_rpm`` (from the header or the command line).
+Required metadata: ``feed_mm_s`` and ``spindle_rpm`` (from the file or the command line).
 Defaults: ``drill_diameter_mm = 2.7``, ``point_angle_deg = 90``. Any other key is kept
 (synthetic recordings store their effect parameters and ground truth this way), and
 ``contact_s``/``cut_end_s`` override the automatic isolation of the cut.
 
 Every mistake is one :class:`~femstudy.errors.UserError` sentence naming the file, and the
-line where that helps. Values given on the command line must agree with the header unless
-``override_header`` is set; then the command line wins and a note says so.
+line, row, property or variable where that helps.
 """
 
 from __future__ import annotations
 
-import io
-import json
-import math
 import os
-import re
-import tomllib
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from femstudy import atomic
 from femstudy.drilling.drill import Drill
 from femstudy.errors import UserError, require
+from femstudy.recordings.columns import assign_channels, parse_column_map
+from femstudy.recordings.formats import excel, matlab, tdms, text
+from femstudy.recordings.formats.table import Table
+from femstudy.recordings.formats.text import TextStyle
+from femstudy.recordings.metadata import check_declared_samples, validate_metadata
+from femstudy.recordings.units import QUANTITY_UNITS, factor_to_solver
 
 MIN_RATE_HZ, MAX_RATE_HZ = 100.0, 10_000.0
 #: Largest file read: 1 GiB, about 25 million rows of time, thrust and torque
 #: (40 minutes at 10 kHz). Longer recordings should be split.
 MAX_FILE_BYTES = 1 << 30
-MAX_HEADER_BYTES = 64 * 1024
 MAX_SAMPLES = 25_000_000
-
-#: Accepted columns: quantity -> {unit suffix: factor to femstudy's unit}.
-COLUMN_UNITS = {
-    "time": {"s": 1.0},
-    "thrust": {"N": 1.0},
-    "torque": {"Nmm": 1.0, "Nm": 1000.0},
-    "depth": {"mm": 1.0},
-    "fx": {"N": 1.0},
-    "fy": {"N": 1.0},
+#: what a folder of recordings may hold
+RECORDING_SUFFIXES = (".csv", ".tsv", ".txt", ".tdms", ".mat", ".xlsx")
+#: the formats :func:`write_recording` writes, by name
+WRITE_FORMATS = {
+    "csv": TextStyle(),
+    "csv-semicolon": TextStyle(delimiter=";"),
+    "tsv": TextStyle(delimiter="\t"),
+    "decimal-comma": TextStyle(delimiter=";", decimal=","),
+    "excel-csv": TextStyle(delimiter=";", decimal=",", bom=True, newline="\r\n"),
+    "dynoware": TextStyle(delimiter="\t", block_header=True),
+    "tdms": tdms.write_table,
+    "mat": matlab.write_table,
+    "mat73": matlab.write_table_v73,
+    "xlsx": excel.write_table,
 }
-UNIT_WORDS = {"s": "seconds", "N": "newtons", "Nmm": "N·mm", "Nm": "N·m", "mm": "millimetres"}
-REQUIRED_COLUMNS = ("time", "thrust")
-
-
-class RecordingMetadata(BaseModel):
-    """Header keys femstudy interprets; any other key is kept as given."""
-
-    model_config = ConfigDict(extra="allow", frozen=True)
-
-    feed_mm_s: float = Field(gt=0, le=50, allow_inf_nan=False)
-    spindle_rpm: float = Field(gt=0, le=100_000, allow_inf_nan=False)
-    drill_diameter_mm: float = Field(2.7, gt=0, le=20, allow_inf_nan=False)
-    point_angle_deg: float = Field(90.0, gt=0, lt=180)
-    specimen: str = ""
-    samples: int | None = Field(None, ge=0)
-    contact_s: float | None = Field(None, allow_inf_nan=False)
-    cut_end_s: float | None = Field(None, allow_inf_nan=False)
+#: the usual file suffix of each format
+FORMAT_SUFFIXES = {"csv": ".csv", "csv-semicolon": ".csv", "tsv": ".tsv", "decimal-comma": ".csv",
+                   "excel-csv": ".csv", "dynoware": ".txt", "tdms": ".tdms", "mat": ".mat", "mat73": ".mat",
+                   "xlsx": ".xlsx"}
+_SOLVER_UNIT_WORDS = {"s": "s", "N": "N", "N*mm": "N·mm", "mm": "mm"}
 
 
 @dataclass(frozen=True)
@@ -119,56 +111,102 @@ class Recording:
 
 
 def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None,
-                   override_header: bool = False) -> Recording:
-    """Read and check one recording; ``overrides`` are metadata from the command line."""
+                   override_header: bool = False, columns: str | Mapping[str, str] | None = None) -> Recording:
+    """Read and check one recording, in s, N, N·mm and mm whatever its file's units.
+
+    Parameters
+    ----------
+    path : path-like
+        A .csv/.tsv/.txt text file, a .tdms, .mat or .xlsx file (told by content, then name).
+    overrides : mapping, optional
+        Metadata from the command line (``--set``); they must agree with the file's.
+    override_header : bool
+        Let ``overrides`` win over the file's values (a note says so).
+    columns : str or mapping, optional
+        Which column is which quantity, e.g. ``"time=Zeit,thrust=Fz[kN],torque=Mz"``
+        (``--columns``); it wins over the file's own ``columns`` metadata key.
+
+    Returns
+    -------
+    Recording
+        Arrays in femstudy's units; ``notes`` lists unit conversions and overrides.
+
+    Example
+    -------
+    >>> rec = read_recording("run.txt", {"feed_mm_s": 1.5, "spindle_rpm": 1500},
+    ...                      columns="time=Zeit[ms],thrust=Fz[kN]")  # doctest: +SKIP
+    """
     path = Path(path)
     name = path.name
     require(path.exists(), f"recording {path} does not exist")
+    require(not path.is_dir(), f"recording {path} is a folder; give one recording file (only calibrate "
+                               f"takes folders of recordings)")
     require(path.is_file(), f"recording {path} is not a file")
-    size = path.stat().st_size
-    require(size > 0, f"recording {name} is empty")
-    require(size <= MAX_FILE_BYTES, f"recording {name} is {size / 2**30:.1f} GiB; femstudy reads "
-                                    f"recordings up to 1 GiB (about 25 million rows): split it")
-    with path.open("rb") as raw:
-        require(b"\x00" not in raw.read(4096), f"recording {name} is not a text (UTF-8) CSV file")
     try:
-        with path.open("r", encoding="utf-8", newline="") as stream:
-            header, columns, first_data_line = _read_header(stream, name)
-            if columns is None:
-                raise UserError(f"recording {name} has no column line (expected e.g. "
-                                f"'time_s,thrust_N,torque_Nmm' after the '#' metadata lines)")
-            metadata, notes = _metadata(header, overrides or {}, override_header, name)
-            quantity_of, factors = _parse_columns(columns, name)
-            if metadata.get("samples") and metadata["samples"] > MAX_SAMPLES:
-                raise UserError(f"recording {name}: the header claims {metadata['samples']:,} samples; "
-                                f"femstudy reads at most {MAX_SAMPLES:,}: split the recording")
-            usecols = sorted(quantity_of)
-            data = _read_numbers(stream, usecols, name, path, first_data_line)
+        size = path.stat().st_size
+        require(size > 0, f"recording {name} is empty")
+        require(size <= MAX_FILE_BYTES, f"recording {name} is {size / 2**30:.1f} GiB; femstudy reads recordings "
+                                        f"up to 1 GiB (about 25 million rows): split it")
+        table = _read_table(path, name)
+        metadata, notes = validate_metadata(table.metadata, table.origins, overrides or {}, override_header,
+                                            name, table.how_to_add)
+        check_declared_samples(metadata, MAX_SAMPLES, name)
+        from_file = parse_column_map(metadata.get("columns"), f"recording {name}: metadata columns")
+        given = parse_column_map(columns, "--columns")
+        notes += [f"--columns {q}={ref.name} overrides the file's {q}={from_file[q].name}"
+                  for q, ref in given.items() if q in from_file and from_file[q] != ref]
+        channels = assign_channels(table.names, table.units, {**from_file, **given}, name, table.word)
+        arrays = table.load([c.index for c in channels])
     except UnicodeDecodeError:
         raise UserError(f"recording {name} is not a text (UTF-8) CSV file") from None
     except OSError as exc:
         raise UserError(f"cannot read recording {path}: {exc.strerror or exc}") from None
-
-    arrays = {quantity_of[c]: data[:, k] * factors[c] for k, c in enumerate(usecols)}
-    for c in usecols:
-        if factors[c] != 1.0:
-            notes.append(f"{columns[c]} converted to N·mm (x{factors[c]:g})")
-    rec = Recording(time_s=arrays["time"], thrust_N=arrays["thrust"], torque_Nmm=arrays.get("torque"),
-                    depth_mm=arrays.get("depth"), fx_N=arrays.get("fx"), fy_N=arrays.get("fy"),
+    values = {c.quantity: a * c.factor for c, a in zip(channels, arrays)}
+    notes += [f"{c.label} converted from {c.unit} to {_SOLVER_UNIT_WORDS[QUANTITY_UNITS[c.quantity][0]]} "
+              f"(x{c.factor:g})" for c in channels if c.factor != 1.0]
+    rec = Recording(time_s=values["time"], thrust_N=values["thrust"], torque_Nmm=values.get("torque"),
+                    depth_mm=values.get("depth"), fx_N=values.get("fx"), fy_N=values.get("fy"),
                     metadata=metadata, source=str(path), notes=tuple(notes))
-    check_recording(rec, lambda row: _line_of_row(path, first_data_line, row))
+    check_recording(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
     return rec
 
 
-def check_recording(rec: Recording, line_of=None) -> None:
+def _read_table(path: Path, name: str) -> Table:
+    """The format's reader, chosen by the file's first bytes, then by its name."""
+    with path.open("rb") as raw:
+        head = raw.read(matlab.USER_BLOCK + 8)
+    suffix = path.suffix.lower()
+    if head.startswith(tdms.MAGIC):
+        return tdms.read_table(path, name)
+    if head.startswith(excel.ZIP_SIGNATURE):
+        return excel.read_table(path, name)
+    if matlab.is_mat(head) or head.startswith(matlab.HDF5_SIGNATURE) or suffix == ".mat":
+        return matlab.read_table(path, name)
+    kinds = {".tdms": "a TDMS file", ".xlsx": "an Excel .xlsx workbook", ".xls": "an Excel workbook"}
+    if suffix in kinds:
+        hint = " (old .xls workbooks are not read: save it as .xlsx or CSV)" if suffix == ".xls" else ""
+        raise UserError(f"recording {name} has a {suffix} name but is not {kinds[suffix]}{hint}")
+    return text.read_table(path, name)
+
+
+def check_recording(rec: Recording, where: Callable[[int], str] | None = None,
+                    columns: Mapping[str, tuple[str, str]] | None = None) -> None:
     """Raise a UserError unless the samples are usable: finite, time strictly increasing,
-    100 Hz–10 kHz, longer than one spindle revolution, a thrust that varies."""
+    100 Hz–10 kHz, longer than one spindle revolution, a thrust that varies.
+
+    ``where(row)`` names a data row in the file's terms ("line 12"); ``columns`` maps a
+    quantity to its column's (name, unit) as written, for the messages.
+    """
     name = rec.name
-    where = (lambda row: f"line {line_of(row)}") if line_of else (lambda row: f"row {row + 1}")
+    where = where or (lambda row: f"row {row + 1}")
+    columns = {**_SOLVER_COLUMNS, **(columns or {})}
     n = rec.time_s.size
     require(n > 0, f"recording {name} has a column line but no data rows")
-    for label, values in (("time_s", rec.time_s), ("thrust_N", rec.thrust_N), ("torque", rec.torque_Nmm),
-                          ("depth_mm", rec.depth_mm), ("fx_N", rec.fx_N), ("fy_N", rec.fy_N)):
+    require(n <= MAX_SAMPLES, f"recording {name} has {n:,} samples; femstudy reads at most {MAX_SAMPLES:,}: "
+                              f"split the recording")
+    for quantity, values in (("time", rec.time_s), ("thrust", rec.thrust_N), ("torque", rec.torque_Nmm),
+                             ("depth", rec.depth_mm), ("fx", rec.fx_N), ("fy", rec.fy_N)):
+        label = columns[quantity][0]
         if values is not None and not np.all(np.isfinite(values)):
             row = int(np.flatnonzero(~np.isfinite(values))[0])
             raise UserError(f"recording {name}: {label} is {values[row]} at {where(row)}; every value "
@@ -182,185 +220,61 @@ def check_recording(rec: Recording, line_of=None) -> None:
     if np.any(steps <= 0):
         row = int(np.flatnonzero(steps <= 0)[0]) + 1
         what = "repeats" if steps[row - 1] == 0 else "goes backwards"
-        raise UserError(f"recording {name}: time_s {what} at {where(row)} ({rec.time_s[row]:g} s after "
+        raise UserError(f"recording {name}: {columns['time'][0]} {what} at {where(row)} ({rec.time_s[row]:g} s after "
                         f"{rec.time_s[row - 1]:g} s); time must increase strictly")
     rate = 1.0 / float(np.median(steps))
     require(MIN_RATE_HZ * 0.99 <= rate <= MAX_RATE_HZ * 1.01,
             f"recording {name} is sampled at {rate:.4g} Hz; femstudy accepts 100 Hz to 10 kHz "
-            f"(is time_s really in seconds?)")
+            f"(is {columns['time'][0]} really in {columns['time'][1]}?)")
     revolution = 60.0 / rec.spindle_rpm
     require(rec.duration_s >= revolution,
             f"recording {name} lasts {rec.duration_s:.4g} s, shorter than one spindle revolution "
             f"({revolution:.4g} s at {rec.spindle_rpm:g} rpm)")
-    require(np.ptp(rec.thrust_N) > 0, f"recording {name}: thrust_N is constant "
+    require(np.ptp(rec.thrust_N) > 0, f"recording {name}: {columns['thrust'][0]} is constant "
                                       f"({rec.thrust_N[0]:g} N), so no cut was recorded")
 
 
-def _read_header(stream, name: str) -> tuple[list[tuple[int, str]], list[str] | None, int]:
-    """Metadata lines (number, text) and the column names; leaves ``stream`` at the data."""
-    header, size, number = [], 0, 0
-    for line in stream:
-        number += 1
-        size += len(line)
-        if size > MAX_HEADER_BYTES:
-            raise UserError(f"recording {name}: the header is longer than {MAX_HEADER_BYTES // 1024} kB "
-                            f"before the column line; is this a recording?")
-        text = line.strip()
-        if not text:
-            continue
-        if text.startswith("#"):
-            header.append((number, text[1:].strip()))
-            continue
-        return header, [c.strip() for c in text.split(",")], number + 1
-    return header, None, number + 1
+_SOLVER_COLUMNS = {"time": ("time_s", "s"), "thrust": ("thrust_N", "N"), "torque": ("torque_Nmm", "N·mm"),
+                   "depth": ("depth_mm", "mm"), "fx": ("fx_N", "N"), "fy": ("fy_N", "N")}
 
 
-_KEY_LINE = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]*\s*=")
+def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = "Nmm", *,
+                    format: str | TextStyle | None = None, time_unit: str = "s", force_unit: str = "N") -> None:
+    """Write ``rec`` in one of :data:`WRITE_FORMATS` (atomically), in the units asked for.
 
+    Parameters
+    ----------
+    path : path-like
+        The file to write.
+    rec : Recording
+        What to write; its metadata go where the format keeps metadata, with ``samples``.
+    torque_unit, time_unit, force_unit : str
+        Units of the written columns (any unit pint reads: ``N·m``, ``ms``, ``kN``, ``lbf`` ...);
+        thrust, fx and fy share ``force_unit``, depth is in mm.
+    format : str or TextStyle, optional
+        A name from :data:`WRITE_FORMATS`, or a :class:`TextStyle`; by default from the
+        suffix (.tsv, .txt DynoWare-like, .tdms, .mat, .xlsx; anything else CSV).
 
-def _metadata(header, overrides: Mapping[str, Any], override_header: bool, name: str):
-    """Header values, command-line values, and the validated combination."""
-    values: dict[str, Any] = {}
-    for number, text in header:
-        if not _KEY_LINE.match(text):
-            continue  # a free-text comment
-        try:
-            values.update(tomllib.loads(text))
-        except tomllib.TOMLDecodeError as exc:
-            raise UserError(f"recording {name}, line {number}: '# {text}' is not 'key = value' with a "
-                            f"TOML value ({exc}); quote text values") from None
-    notes = []
-    for key, value in overrides.items():
-        if key in values and not _same(values[key], value):
-            if not override_header:
-                raise UserError(f"recording {name}: its header says {key} = {_show(values[key])} but the "
-                                f"command line says {_show(value)}; remove one of them, or pass "
-                                f"--override to let the command line win")
-            notes.append(f"{key} = {_show(value)} from the command line overrides "
-                         f"{_show(values[key])} in the header")
-        values[key] = value
-    for key in ("feed_mm_s", "spindle_rpm"):
-        require(key in values, f"recording {name} has no {key}: add '# {key} = ...' to its header or "
-                               f"give it on the command line (--set {key}=...)")
-    try:
-        model = RecordingMetadata(**values)
-    except ValidationError as exc:
-        err = exc.errors()[0]
-        key = ".".join(str(p) for p in err["loc"])
-        raise UserError(f"recording {name}: metadata {key} = {_show(values.get(key))} is invalid: "
-                        f"{err['msg'].lower()}") from None
-    merged = {**values, **model.model_dump(exclude_none=True)}
-    return merged, notes
-
-
-def _same(a, b) -> bool:
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
-        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
-    return a == b
-
-
-def _show(value) -> str:
-    return json.dumps(value) if isinstance(value, str) else repr(value)
-
-
-def _parse_columns(columns: list[str], name: str) -> tuple[dict[int, str], dict[int, float]]:
-    """Map column index -> quantity and unit factor; explain unit-less or unknown units."""
-    quantity_of, factors, seen = {}, {}, {}
-    for index, column in enumerate(columns):
-        quantity, _, unit = column.partition("_")
-        base = quantity.lower()
-        if base not in COLUMN_UNITS:
-            continue  # an extra column, ignored
-        accepted = " or ".join(f"{base}_{u} ({UNIT_WORDS[u]})" for u in COLUMN_UNITS[base])
-        if not unit:
-            raise UserError(f"recording {name}: column '{column}' has no unit; name it {accepted}")
-        if unit not in COLUMN_UNITS[base]:
-            raise UserError(f"recording {name}: column '{column}' has unit '{unit}', which femstudy does "
-                            f"not convert; name it {accepted}")
-        if base in seen:
-            raise UserError(f"recording {name} has two {base} columns ('{seen[base]}' and '{column}')")
-        seen[base] = column
-        quantity_of[index], factors[index] = base, COLUMN_UNITS[base][unit]
-    for base in REQUIRED_COLUMNS:
-        if base not in seen:
-            unit = next(iter(COLUMN_UNITS[base]))
-            raise UserError(f"recording {name} has no {base}_{unit} column ({UNIT_WORDS[unit]}); its "
-                            f"columns are: {', '.join(columns) or 'none'}")
-    return quantity_of, factors
-
-
-def _read_numbers(stream, usecols: list[int], name: str, path: Path, first_line: int) -> np.ndarray:
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked later
-            data = np.loadtxt(stream, delimiter=",", usecols=usecols, ndmin=2, comments="#")
-    except ValueError:
-        raise UserError(_first_bad_line(path, first_line, usecols, name)) from None
-    return data
-
-
-def _first_bad_line(path: Path, first_line: int, usecols: list[int], name: str) -> str:
-    """Locate the first data line that is not a row of numbers (slow path, errors only)."""
-    with path.open("r", encoding="utf-8") as stream:
-        for number, line in enumerate(stream, start=1):
-            text = line.strip()
-            if number < first_line or not text or text.startswith("#"):
-                continue
-            fields = [f.strip() for f in text.split(",")]
-            if len(fields) <= max(usecols):
-                return f"recording {name}, line {number}: {len(fields)} values, expected one per column"
-            for k in usecols:
-                try:
-                    float(fields[k])
-                except ValueError:
-                    shown = fields[k] or "an empty field"
-                    return f"recording {name}, line {number}: {shown!s} in column {k + 1} is not a number"
-    return f"recording {name}: the data rows do not all have the same number of values"
-
-
-def _line_of_row(path: Path, first_line: int, row: int) -> int:
-    """1-based line number of data row ``row`` (skipping blank and comment lines)."""
-    seen = -1
-    with path.open("r", encoding="utf-8") as stream:
-        for number, line in enumerate(stream, start=1):
-            text = line.strip()
-            if number < first_line or not text or text.startswith("#"):
-                continue
-            seen += 1
-            if seen == row:
-                return number
-    return first_line + row
-
-
-def format_header_value(value) -> str:
-    """A Python value as a TOML value for a ``# key = value`` line."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, (int, np.integer)):
-        return str(int(value))
-    if isinstance(value, (float, np.floating)):
-        return repr(float(value)) if math.isfinite(value) else ("nan" if math.isnan(value) else
-                                                                ("inf" if value > 0 else "-inf"))
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(format_header_value(v) for v in value) + "]"
-    return json.dumps(str(value))
-
-
-def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = "Nmm") -> None:
-    """Write ``rec`` in the recording format (atomically); torque in N·mm or N·m."""
-    require(torque_unit in ("Nmm", "Nm"), f"torque unit must be Nmm or Nm, got '{torque_unit}'")
-    columns = [("time_s", rec.time_s, "%.9g"), ("thrust_N", rec.thrust_N, "%.6g")]
-    if rec.torque_Nmm is not None:
-        scale = 1.0 if torque_unit == "Nmm" else 1e-3
-        columns.append((f"torque_{torque_unit}", rec.torque_Nmm * scale, "%.6g"))
-    for label, values in (("depth_mm", rec.depth_mm), ("fx_N", rec.fx_N), ("fy_N", rec.fy_N)):
+    Example
+    -------
+    >>> write_recording("run.xlsx", rec, "N*m", time_unit="ms")  # doctest: +SKIP
+    """
+    suffix_formats = {".tsv": "tsv", ".txt": "dynoware", ".tdms": "tdms", ".mat": "mat", ".xlsx": "xlsx"}
+    chosen = suffix_formats.get(Path(path).suffix.lower(), "csv") if format is None else format
+    if isinstance(chosen, str):
+        require(chosen in WRITE_FORMATS, f"unknown recording format '{chosen}'; choose one of "
+                                         f"{', '.join(WRITE_FORMATS)}")
+        chosen = WRITE_FORMATS[chosen]
+    units = {"time": time_unit, "thrust": force_unit, "torque": torque_unit, "depth": "mm", "fx": force_unit,
+             "fy": force_unit}
+    columns = []
+    for quantity, values in (("time", rec.time_s), ("thrust", rec.thrust_N), ("torque", rec.torque_Nmm),
+                             ("depth", rec.depth_mm), ("fx", rec.fx_N), ("fy", rec.fy_N)):
         if values is not None:
-            columns.append((label, values, "%.6g"))
-    meta = {**rec.metadata, "samples": int(rec.time_s.size)}
-    buf = io.StringIO()
-    for key, value in meta.items():
-        buf.write(f"# {key} = {format_header_value(value)}\n")
-    buf.write(",".join(c[0] for c in columns) + "\n")
-    np.savetxt(buf, np.column_stack([c[1] for c in columns]), delimiter=",",
-               fmt=[c[2] for c in columns])
-    atomic.write_text(path, buf.getvalue())
+            factor = factor_to_solver(units[quantity], quantity, f"the {quantity} column to write")
+            columns.append((quantity, units[quantity], np.asarray(values, dtype=float) / factor))
+    metadata = {**rec.metadata, "samples": int(rec.time_s.size)}
+    if isinstance(chosen, TextStyle):
+        text.write_table(path, columns, metadata, chosen)
+    else:
+        chosen(path, columns, metadata)

@@ -35,6 +35,23 @@ from femstudy.recordings.reader import Recording
 SYNTH_MODELS = ("clogging", "allotta")
 
 
+#: (option, Effects field, parameter, default, help) of every switchable effect; 0 switches it off.
+EFFECT_OPTIONS = [
+    ("noise-thrust-N", "noise", "thrust_N", 0.3, "Gaussian thrust noise, standard deviation [N]"),
+    ("noise-torque-Nmm", "noise", "torque_Nmm", 1.0, "Gaussian torque noise, standard deviation [N.mm]"),
+    ("ripple", "ripple", "fraction", 0.05, "spindle-frequency ripple, fraction of the load"),
+    ("pulsation", "pulsation", "amplitude", 0.2, "feed pulsation amplitude, fraction of the feed"),
+    ("pulsation-hz", "pulsation", "frequency_hz", 1.0, "feed pulsation frequency [Hz]"),
+    ("drift-N-per-s", "drift", "thrust_N_per_s", 0.05, "thrust sensor drift [N/s]"),
+    ("drift-Nmm-per-s", "drift", "torque_Nmm_per_s", 0.2, "torque sensor drift [N.mm/s]"),
+    ("softening", "softening", "fraction", 0.0, "thermal softening: final fractional load loss"),
+    ("softening-s", "softening", "time_constant_s", 2.0, "thermal softening time constant [s]"),
+]
+#: the parameters that switch each effect on (any non-zero) or off (all 0)
+SWITCHES = {"noise": ("thrust_N", "torque_Nmm"), "ripple": ("fraction",), "pulsation": ("amplitude",),
+            "drift": ("thrust_N_per_s", "torque_Nmm_per_s"), "softening": ("fraction",)}
+
+
 @dataclass(frozen=True)
 class Noise:
     """White Gaussian noise: standard deviations of thrust [N] and torque [N·mm]."""
@@ -92,6 +109,25 @@ class Effects:
     def none(cls) -> "Effects":
         """The load model alone."""
         return cls(noise=None, ripple=None, pulsation=None, drift=None, softening=None)
+
+    @classmethod
+    def from_options(cls, values: dict[str, float | None], clean: bool = False,
+                     pulsation_shape: str = "sine") -> "Effects":
+        """Effects from :data:`EFFECT_OPTIONS` values keyed by option name (``"noise-thrust-N"``).
+
+        A value of None takes the option's default (0 when ``clean``); an effect whose switch
+        parameters are all 0 is off. Drift rates may be negative, every other value is >= 0.
+        """
+        chosen: dict[str, dict] = {group: {} for group in SWITCHES}
+        for option, group, field, default, _ in EFFECT_OPTIONS:
+            given = values.get(option)
+            require(given is None or given >= 0 or group == "drift", f"--{option} must be >= 0, got {given}")
+            chosen[group][field] = given if given is not None else (0.0 if clean else default)
+        chosen["pulsation"]["shape"] = pulsation_shape
+        kinds = {"noise": Noise, "ripple": SpindleRipple, "pulsation": FeedPulsation, "drift": SensorDrift,
+                 "softening": ThermalSoftening}
+        return cls(**{group: kinds[group](**chosen[group]) if any(chosen[group][f] != 0 for f in switch) else None
+                      for group, switch in SWITCHES.items()})
 
     def names(self) -> list[str]:
         return [label for label, on in (("noise", self.noise), ("spindle_ripple", self.ripple),

@@ -26,10 +26,15 @@ def _save(fig, path: Path) -> None:
     fig.clf()
 
 
+def _values(result: LoadingResult, quantity: str):
+    """A loading's series of a load (thrust_N, torque_Nmm) or response quantity."""
+    return getattr(result, quantity) if quantity in ("thrust_N", "torque_Nmm") else result.series[quantity]
+
+
 def _panel(ax, results, quantity, ylabel, linestyle="-", suffix=""):
     for r in results:
         style = STYLE[r.name]
-        ax.plot(r.time_s, getattr(r, quantity), ls=linestyle, marker=".", ms=3, color=style["color"],
+        ax.plot(r.time_s, _values(r, quantity), ls=linestyle, marker=".", ms=3, color=style["color"],
                 label=style["label"] + suffix)
     ax.set_ylabel(ylabel)
     ax.set_ylim(bottom=0)
@@ -53,12 +58,12 @@ def write_figures(folder: Path, title: str, results: list[LoadingResult]) -> lis
     for key, dashed, axis_label, dashed_label, what, name in (
             ("max_deflection_mm", "drill_point_deflection_mm", "deflection [mm]", "at drill point",
              "deflection (displacement magnitude)", "deflection.png"),
-            ("max_von_mises_MPa", "max_von_mises_excl_MPa", "von Mises stress [MPa]", "outside load-patch zone",
+            ("max_von_mises_MPa", "max_von_mises_excl_MPa", "von Mises stress [MPa]", "outside the exclusion zone",
              "maximum von Mises stress", "von_mises.png")):
         fig, ax = plt.subplots(figsize=(7.5, 4.5), constrained_layout=True)
         _panel(ax, results, key, axis_label, suffix=", maximum")
         for r in results:
-            ax.plot(r.time_s, getattr(r, dashed), ls="--", color=STYLE[r.name]["color"],
+            ax.plot(r.time_s, _values(r, dashed), ls="--", color=STYLE[r.name]["color"],
                     label=f"{STYLE[r.name]['label']}, {dashed_label}")
         ax.legend(fontsize=8, loc="upper left")
         ax.set_xlabel("time after contact [s]")

@@ -1,20 +1,23 @@
 """Load histories of a study case: the dynamic (cutting + chip evacuation) and the static
-Allotta loading, sampled on the case's time grid (thesis §5.9).
+Allotta loading, sampled on the case's time grid (thesis §5.9), and the resolved history.
 
 Dynamic: model "clogging" of :mod:`femstudy.drilling.history` at the case's feed, speed,
 drill and bone set, with the hole's cortex equal to the drilled depth. Static: Allotta's
 full-engagement thrust and torque, constant in time (the thesis's comparison load).
-Units: s, N, N·mm.
+Resolved: the dynamic loading with its per-flute oscillation and breakthrough release, on a
+grid that resolves both (:func:`resolved_loading`). Units: s, N, N·mm.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from femstudy.casefile import Case
-from femstudy.drilling import Drill, DrillingConditions, LoadHistory, evaluate, load_bone_set, time_grid
+from femstudy.drilling import (Drill, DrillingConditions, DynamicContent, LoadHistory, evaluate, load_bone_set,
+                               time_grid)
 
 
 @dataclass(frozen=True)
@@ -43,13 +46,14 @@ def drilled_depth_mm(case: Case, cortical_thickness_mm: float) -> float:
     return cortical_thickness_mm if case.drilling.depth_mm == "cortex" else float(case.drilling.depth_mm)
 
 
-def case_loading(case: Case, cortical_thickness_mm: float) -> CaseLoading:
-    """Evaluate both loadings of ``case`` on its time grid (0 … end_s in step_s)."""
+def case_loading(case: Case, cortical_thickness_mm: float, bones_dir: Path | None = None) -> CaseLoading:
+    """Evaluate both loadings of ``case`` on its time grid (0 … end_s in step_s); calibrated
+    bone sets are looked up in ``bones_dir``."""
     drill = Drill(diameter_mm=case.drill.diameter_mm, point_angle_deg=case.drill.point_angle_deg)
     if case.drill.wall_mm is not None:
         drill = drill.with_(wall_mm=case.drill.wall_mm)
     depth = drilled_depth_mm(case, cortical_thickness_mm)
-    bone = load_bone_set(case.drilling.bone)
+    bone = load_bone_set(case.drilling.bone, bones_dir)
     friction = None
     if case.drilling.mu_f is not None or case.drilling.mu_w is not None:
         from_law = bone.friction(case.drilling.feed_mm_s, case.drilling.spindle_rpm)
@@ -61,3 +65,26 @@ def case_loading(case: Case, cortical_thickness_mm: float) -> CaseLoading:
     dynamic = evaluate("clogging", cond, times)
     dynamic = replace(dynamic, thrust_N=k * dynamic.thrust_N, torque_Nmm=k * dynamic.torque_Nmm)
     return CaseLoading(cond, depth, dynamic, k * thrust, k * torque)
+
+
+def dynamic_content(case: Case, cond: DrillingConditions) -> DynamicContent:
+    """The case's per-flute oscillation and breakthrough release ("flute": one flute passage)."""
+    release = case.drilling.breakthrough_release_s
+    if release == "flute":
+        release = 1.0 / cond.drill.flute_passing_hz(cond.spindle_rpm)
+    return DynamicContent(case.drilling.flute_oscillation, float(release))
+
+
+def resolved_loading(case: Case, loading: CaseLoading, dt_s: float) -> LoadHistory:
+    """The dynamic loading with its oscillation and release, every ``dt_s`` [s] over the
+    resolved window: from ``analysis.resolved_lead_s`` before breakthrough (or contact) to
+    0.1 s past the release."""
+    cond = loading.conditions
+    content = dynamic_content(case, cond)
+    breakthrough = cond.phase_times()["breakthrough"]
+    start = max(0.0, breakthrough - case.analysis.resolved_lead_s)
+    end = breakthrough + content.release_s + 0.1
+    times = start + np.arange(int(np.floor((end - start) / dt_s + 1e-9)) + 1) * dt_s
+    history = evaluate("clogging", cond, times, content)
+    k = case.drilling.load_scale
+    return replace(history, thrust_N=k * history.thrust_N, torque_Nmm=k * history.torque_Nmm)

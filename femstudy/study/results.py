@@ -1,6 +1,6 @@
 """Per-step response of one loading, and the numbers a paper needs from it.
 
-Units: s, N, N·mm, mm, MPa, mJ (= N·mm).
+Units: s, N, N·mm, mm, MPa.
 """
 
 from __future__ import annotations
@@ -9,56 +9,84 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from femstudy.femur_model import REGION_NAMES
-from femstudy.study.thesis import STRENGTH_MPA
+from femstudy import thesis
+from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, REGION_NAMES
+
+_CANCELLOUS = {"ultimate": thesis.CANCELLOUS_STRENGTH_MPA["mean"], "source": "thesis Table 2-5, mean (range 0.56-22.9)"}
+#: Strength per region [MPa] for the margin to failure: the lowest longitudinal cortical
+#: limits (Table 2-4) and the mean cancellous strength (Table 2-5).
+STRENGTH_MPA = {
+    CORTICAL: {"yield": thesis.CORTICAL_STRENGTH_MPA["longitudinal_tension_yield"],
+               "ultimate": thesis.CORTICAL_STRENGTH_MPA["longitudinal_tension_ultimate"],
+               "source": "thesis Table 2-4, longitudinal tension"},
+    CANCELLOUS_PROXIMAL: _CANCELLOUS, CANCELLOUS_DISTAL: _CANCELLOUS,
+}
+
+#: Study quantity → the response measure (femstudy.fe.outputs) it is read from.
+MEASURES = {"max_deflection_mm": "deflection", "drill_point_deflection_mm": "drill_point",
+            "max_von_mises_MPa": "von_mises", "max_von_mises_excl_MPa": "von_mises/outside"}
 
 
 @dataclass(frozen=True)
-class LoadingResult:
-    """Response of the femur to one loading ("dynamic" or "static"), one entry per time step.
+class Peak:
+    """The largest value of a quantity over the loading, when and where it occurs."""
 
-    Point arrays are (n_steps, 3) [mm]: where the maximum occurs at that step.
-    ``region_max_von_mises_MPa`` maps a region code to its per-step maximum.
+    value: float
+    time_s: float
+    location_mm: tuple[float, float, float] | None = None
+
+    def as_dict(self) -> dict:
+        out = {"value": self.value, "time_s": self.time_s}
+        if self.location_mm is not None:
+            out["location_mm"] = [round(float(x), 3) for x in self.location_mm]
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class LoadingResult:
+    """The femur's response to one loading ("dynamic" or "static").
+
+    time_s, thrust_N, torque_Nmm and ``series`` (quantity → values) are given at the recorded
+    steps (every step of a short history); ``peaks`` are exact over every step.
+    ``region_peaks`` maps a region name to its peak von Mises stress [MPa].
     """
 
     name: str
     time_s: np.ndarray
     thrust_N: np.ndarray
     torque_Nmm: np.ndarray
-    max_deflection_mm: np.ndarray
-    max_deflection_point: np.ndarray
-    drill_point_deflection_mm: np.ndarray
-    max_von_mises_MPa: np.ndarray
-    max_von_mises_point: np.ndarray
-    max_von_mises_excl_MPa: np.ndarray
-    max_von_mises_excl_point: np.ndarray
-    region_max_von_mises_MPa: dict = field(default_factory=dict)
-    strain_energy_mJ: np.ndarray | None = None
+    series: dict
+    peaks: dict
+    region_peaks: dict = field(default_factory=dict)
 
-    def peak(self, quantity: str) -> dict:
-        """The maximum over time of a per-step quantity, with its time and location."""
-        values = getattr(self, quantity)
-        k = int(np.argmax(values))
-        out = {"value": float(values[k]), "time_s": float(self.time_s[k])}
-        point_name = {"max_deflection_mm": "max_deflection_point",
-                      "max_von_mises_MPa": "max_von_mises_point",
-                      "max_von_mises_excl_MPa": "max_von_mises_excl_point"}.get(quantity)
-        if point_name:
-            out["location_mm"] = [round(float(x), 3) for x in getattr(self, point_name)[k]]
-        return out
+    @classmethod
+    def from_history(cls, name: str, all_times, thrust, torque, history) -> "LoadingResult":
+        """From a :class:`femstudy.fe.outputs.History` of this loading over ``all_times``."""
+        steps = history.recorded_steps
+        t = np.asarray(all_times, float)
+        series = {q: history[m].values for q, m in MEASURES.items()}
+        peaks = {q: Peak(history[m].peak, float(t[history[m].peak_step]), tuple(history[m].peak_location))
+                 for q, m in MEASURES.items()}
+        regions = {REGION_NAMES[c]: history[f"von_mises/{REGION_NAMES[c]}"].peak for c in REGION_NAMES
+                   if f"von_mises/{REGION_NAMES[c]}" in history.measures}
+        return cls(name, t[steps], np.asarray(thrust, float)[steps], np.asarray(torque, float)[steps], series,
+                   peaks, regions)
+
+    def peak(self, quantity: str) -> Peak:
+        return self.peaks[quantity]
 
     def margins(self) -> dict:
         """Strength / peak von Mises per region (Tables 2-4 and 2-5): the margin to failure."""
         out = {}
-        for code, series in self.region_max_von_mises_MPa.items():
-            peak = float(np.max(series))
-            limits = STRENGTH_MPA[code]
+        codes = {name: code for code, name in REGION_NAMES.items()}
+        for region, peak in self.region_peaks.items():
+            limits = STRENGTH_MPA[codes[region]]
             entry = {"peak_von_mises_MPa": peak, "strength_source": limits["source"]}
             for kind in ("yield", "ultimate"):
                 if kind in limits:
                     entry[f"{kind}_MPa"] = limits[kind]
                     entry[f"safety_factor_{kind}"] = (limits[kind] / peak) if peak > 0 else None
-            out[REGION_NAMES[code]] = entry
+            out[region] = entry
         return out
 
 
@@ -66,23 +94,30 @@ TIMESERIES_COLUMNS = ["loading", "time_s", "thrust_N", "torque_Nmm", "max_deflec
                       "drill_point_deflection_mm", "max_von_mises_MPa", "max_von_mises_excl_MPa"]
 
 
-def timeseries_csv(results: list[LoadingResult]) -> str:
-    """Both loadings in long form, one row per loading and step, units in the column names."""
-    lines = [",".join(TIMESERIES_COLUMNS)]
+def timeseries_rows(results: list[LoadingResult]) -> list[dict]:
+    """Both loadings in long form: one dict per loading and recorded step, units in the keys."""
+    rows = []
     for r in results:
         for k in range(len(r.time_s)):
-            values = [r.time_s[k], r.thrust_N[k], r.torque_Nmm[k], r.max_deflection_mm[k],
-                      r.drill_point_deflection_mm[k], r.max_von_mises_MPa[k], r.max_von_mises_excl_MPa[k]]
-            lines.append(",".join([r.name] + [f"{v:.6g}" for v in values]))
+            rows.append({"loading": r.name, "time_s": float(r.time_s[k]), "thrust_N": float(r.thrust_N[k]),
+                         "torque_Nmm": float(r.torque_Nmm[k]),
+                         **{q: float(r.series[q][k]) for q in MEASURES}})
+    return rows
+
+
+def timeseries_csv(results: list[LoadingResult]) -> str:
+    """:func:`timeseries_rows` as CSV."""
+    lines = [",".join(TIMESERIES_COLUMNS)]
+    for row in timeseries_rows(results):
+        lines.append(",".join([row["loading"]] + [f"{row[c]:.6g}" for c in TIMESERIES_COLUMNS[1:]]))
     return "\n".join(lines) + "\n"
 
 
 def comparison(dynamic: LoadingResult, static: LoadingResult) -> dict:
     """Peaks of both loadings and their dynamic/static ratios."""
     out = {}
-    for quantity in ("max_deflection_mm", "drill_point_deflection_mm",
-                     "max_von_mises_MPa", "max_von_mises_excl_MPa"):
+    for quantity in MEASURES:
         d, s = dynamic.peak(quantity), static.peak(quantity)
-        out[quantity] = {"dynamic": d, "static": s,
-                         "ratio_dynamic_to_static": d["value"] / s["value"] if s["value"] > 0 else None}
+        out[quantity] = {"dynamic": d.as_dict(), "static": s.as_dict(),
+                         "ratio_dynamic_to_static": d.value / s.value if s.value > 0 else None}
     return out

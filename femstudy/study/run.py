@@ -1,4 +1,12 @@
-"""One study run: case → femur model → load histories → static and transient FE → results.
+"""One study: case → femur model → load histories → one factorisation → static, transient,
+modal and resolved analyses → :class:`StudyResult` and its results folder.
+
+The clamped stiffness K_ff is factorised once. The static solve, the transient's reduced
+basis (load-dependent Ritz vectors, femstudy.fe.transient), the modal analysis (shift-invert
+about 0) and the resolved transient all use that factorisation; a second one (K̂) is made
+only when a reduced march fails its check against the full equations. Every loading's
+response is then read from one projection of the basis onto the output points
+(femstudy.fe.outputs).
 
 The results folder is built under a temporary name and renamed into place at the end
 (:func:`femstudy.atomic.atomic_folder`), so an interrupted run never leaves a folder that
@@ -7,22 +15,31 @@ looks complete.
 
 from __future__ import annotations
 
-import json
+import logging
 import platform
 import time
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
-from femstudy import __version__, atomic
+from femstudy import __version__, fe
 from femstudy.casefile import Case
-from femstudy.console import Console
 from femstudy.femur_model import REGION_NAMES
-from femstudy.study import fields, figures, render, report
-from femstudy.study.loading import case_loading
-from femstudy.study.results import LoadingResult, comparison, timeseries_csv
+from femstudy.meshing.cache import DEFAULT_CACHE_DIR
+from femstudy.fe.linsolve import available_memory_bytes
+from femstudy.meshing.model import surface_file
+from femstudy.study import feasibility
+from femstudy.study.femur import femur_model, femur_spec
+from femstudy.study.loading import CaseLoading, case_loading, resolved_loading
+from femstudy.study.results import LoadingResult, comparison
+
+log = logging.getLogger(__name__)
+
+#: The resolved run's basis is enriched to this error indicator (accepted below 1e-4; docs/solver.md).
+RESOLVED_RTOL = 1e-5
 
 PACKAGES = ("numpy", "scipy", "scikit-fem", "pytetwild", "pyvista", "meshio", "pypardiso")
 
@@ -38,118 +55,288 @@ def versions() -> dict:
     return out
 
 
-def _loading_result(name, times, thrust, torque, rows, system) -> LoadingResult:
-    """Collect per-step ``femstudy.fe.response`` dicts into a :class:`LoadingResult`."""
-    def column(key):
-        return np.array([r[key] for r in rows], float)
+@dataclass(frozen=True)
+class Dynamics:
+    """How the transients ran and what inertia does.
 
-    region_codes = {v: k for k, v in REGION_NAMES.items()}
-    return LoadingResult(
-        name=name, time_s=np.asarray(times, float), thrust_N=np.asarray(thrust, float),
-        torque_Nmm=np.asarray(torque, float),
-        max_deflection_mm=column("max_deflection_mm"), max_deflection_point=column("max_deflection_at_mm"),
-        drill_point_deflection_mm=column("drill_point_deflection_mm"),
-        max_von_mises_MPa=column("max_von_mises_MPa"), max_von_mises_point=column("max_von_mises_at_mm"),
-        max_von_mises_excl_MPa=column("max_von_mises_outside_MPa"),
-        max_von_mises_excl_point=np.array([r["max_von_mises_outside_at_mm"] or [np.nan] * 3 for r in rows], float),
-        region_max_von_mises_MPa={region_codes[name]: np.array([r["regions"][name]["max_von_mises_MPa"] for r in rows])
-                                  for name in rows[0]["regions"]},
-        strain_energy_mJ=column("strain_energy_mJ"))
+    scheme, vectors, indicator : the thesis-step march (femstudy.fe.transient)
+    lowest_period_s, step_check : from the modal analysis
+    resolved_* : the resolved run (step, steps, vectors, indicator, peak deflection and its
+                 quasi-static counterpart [mm]); amplification = resolved / quasi-static peak
+    """
+
+    scheme: str
+    vectors: int
+    indicator: float
+    frequencies_Hz: tuple = ()
+    step_check: fe.StepCheck | None = None
+    resolved_step_s: float | None = None
+    resolved_steps: int | None = None
+    resolved_window_s: tuple | None = None
+    resolved_vectors: int | None = None
+    resolved_indicator: float | None = None
+    resolved_peak_mm: float | None = None
+    quasi_static_peak_mm: float | None = None
+    resolved_drill_point_mm: float | None = None
+    quasi_static_drill_point_mm: float | None = None
+    flute_passing_Hz: float | None = None
+
+    @property
+    def amplification(self) -> float | None:
+        """Resolved / quasi-static peak of the maximum deflection."""
+        if self.resolved_peak_mm is None or not self.quasi_static_peak_mm:
+            return None
+        return self.resolved_peak_mm / self.quasi_static_peak_mm
+
+    def as_dict(self) -> dict:
+        out = {k: v for k, v in self.__dict__.items() if k != "step_check"}
+        out["frequencies_Hz"] = [float(f) for f in self.frequencies_Hz]
+        out["dynamic_amplification"] = self.amplification
+        if self.step_check is not None:
+            out["step_check"] = dict(self.step_check.__dict__)
+        return out
 
 
-def _field_steps(n_steps: int, every: int) -> list[int]:
-    return sorted(set(range(0, n_steps, every)) | {n_steps - 1})
+@dataclass(frozen=True, eq=False)
+class StudyResult:
+    """The outcome of :func:`run_study`: the dynamic and static loadings' responses, the
+    dynamics, and everything summary.json records (:meth:`to_json`).
+
+    Attributes
+    ----------
+    case : Case
+    dynamic, static : LoadingResult
+        Per-step series and exact peaks of each loading.
+    dynamics : Dynamics
+    loading : CaseLoading
+    out_dir : Path or None
+        The results folder, when one was written.
+    """
+
+    case: Case
+    dynamic: LoadingResult
+    static: LoadingResult
+    dynamics: Dynamics
+    loading: CaseLoading
+    summary: dict
+    out_dir: Path | None = None
+
+    def to_json(self) -> dict:
+        """The summary.json document (inputs, versions, mesh, solver, peaks, ratios, timings)."""
+        from femstudy.jsonable import jsonable
+
+        return jsonable(self.summary)
+
+    def peak(self, quantity: str, loading: str = "dynamic"):
+        """The :class:`~femstudy.study.results.Peak` of a quantity (e.g. "max_deflection_mm")."""
+        return (self.dynamic if loading == "dynamic" else self.static).peak(quantity)
+
+    def timeseries(self) -> list[dict]:
+        """Both loadings' series, one dict per loading and step, keys with units."""
+        from femstudy.study.results import timeseries_rows
+
+        return timeseries_rows([self.dynamic, self.static])
 
 
-def run_case(case: Case, out_dir: Path, mesh_size_mm: float | None = None,
-             console: Console | None = None) -> dict:
-    """Run ``case`` and write its results folder; return the summary (also summary.json)."""
-    from femstudy import fe
-    from femstudy.meshing import build_femur_model
+def study_channels(system, patch, model, exclusion_radius_mm: float, clamp_length_mm: float) -> list:
+    """The output points of a study: every node's |u|, the drill point's mean displacement,
+    and every stress point's von Mises stress, with masks for the points more than the
+    exclusion radius from the drill point and from the clamped ends, and per region."""
+    from femstudy.fe.post import quadrature_points
 
-    console = console or Console()
+    points = quadrature_points(system)
+    nq = points.shape[1]
+    points = points.reshape(-1, 3)
+    heights = points @ model.frame.up
+    nodes_up = system.nodes @ model.frame.up
+    margin = clamp_length_mm + exclusion_radius_mm
+    away = ((np.linalg.norm(points - patch.centre, axis=1) > exclusion_radius_mm)
+            & (heights < nodes_up.max() - margin) & (heights > nodes_up.min() + margin))
+    masks = {"outside": away}
+    for code, name in REGION_NAMES.items():
+        masks[name] = np.repeat(system.region == code, nq)
+    return [fe.deflection_channel(system), fe.point_channel("drill_point", patch.mean, patch.centre),
+            fe.von_mises_channel(system, masks)]
+
+
+def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | None = None,
+              cache_dir: Path = DEFAULT_CACHE_DIR, solver: str = "auto", bones_dir: Path | None = None,
+              force: bool = False) -> StudyResult:
+    """Run the drilling study of ``case``; write its results folder when ``out_dir`` is given.
+
+    Parameters
+    ----------
+    case : Case
+        From :func:`femstudy.casefile.load_case` or :func:`~femstudy.casefile.parse_case`.
+    out_dir : Path, optional
+        Results folder (replaced as a whole, atomically).
+    mesh_size_mm : float, optional
+        Overrides ``case.mesh.size_mm``.
+    cache_dir : Path
+        Mesh cache folder.
+    solver : str
+        "auto" or a linear solver of :data:`femstudy.fe.linsolve.METHODS`.
+    bones_dir : Path, optional
+        Folder of calibrated bone sets named by ``case.drilling.bone``.
+    force : bool
+        Run even when the study is estimated to take very long (one that cannot fit in
+        memory is refused regardless).
+
+    Returns
+    -------
+    StudyResult
+
+    Examples
+    --------
+    >>> import femstudy
+    >>> case = femstudy.load_case("cases/middiaphysis.toml")                # doctest: +SKIP
+    >>> result = femstudy.run_study(case, mesh_size_mm=16)                  # doctest: +SKIP
+    >>> result.peak("max_deflection_mm").value                              # doctest: +SKIP
+    0.0539
+    """
     if mesh_size_mm is not None:  # so that summary.json echoes the size actually used
         case = case.model_copy(update={"mesh": case.mesh.model_copy(update={"size_mm": float(mesh_size_mm)})})
     clock = {"start": time.perf_counter()}
-    console.progress(f"case '{case.name}': building or loading the femur mesh")
-    model = build_femur_model(case, console=console)
+    feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force)
+    log.info("case '%s': building or loading the femur mesh", case.name)
+    model = femur_model(case, cache_dir)
     clock["mesh"] = time.perf_counter()
 
-    loading = case_loading(case, model.site.cortical_thickness_mm)
-    times = loading.times_s
-    dyn = loading.dynamic
-    console.progress(f"loads: dynamic peak {dyn.thrust_N.max():.1f} N / {dyn.torque_Nmm.max():.1f} N.mm, "
-                     f"static {loading.static_thrust_N:.1f} N / {loading.static_torque_Nmm:.1f} N.mm, "
-                     f"{len(times) - 1} steps of {case.time.step_s:g} s")
-
-    system = fe.assemble(model.mesh, case.materials, order=case.mesh.order,
-                         long_axis=model.frame.up, console=console)
-    bc = fe.clamp(system, model.clamps)
+    loading = case_loading(case, model.site.cortical_thickness_mm, bones_dir)
+    times, dyn = loading.times_s, loading.dynamic
+    log.info("loads: dynamic peak %.1f N / %.1f N.mm, static %.1f N / %.1f N.mm, %d steps of %g s",
+             dyn.thrust_N.max(), dyn.torque_Nmm.max(), loading.static_thrust_N, loading.static_torque_Nmm,
+             len(times) - 1, case.time.step_s)
+    system = fe.assemble(model.mesh, case.materials.to_fe(), order=case.mesh.order, long_axis=model.frame.up)
     patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
+    channels = study_channels(system, patch, model, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
     clock["assembly"] = time.perf_counter()
-    excl = case.analysis.exclusion_radius_mm
+    fs = fe.factorize(system, fe.clamp(system, model.clamps), solver)
+    clock["factor"] = time.perf_counter()
 
-    console.progress("static Allotta loading (full-engagement thrust and torque)")
-    u_static = fe.solve_static(system, bc, patch.force(loading.static_thrust_N, loading.static_torque_Nmm),
-                               console=console)
-    static_row = fe.response(system, u_static, patch, excl)
-    static = _loading_result("static", times, np.full_like(times, loading.static_thrust_N),
-                             np.full_like(times, loading.static_torque_Nmm), [static_row] * len(times), system)
-    clock["static"] = time.perf_counter()
-
-    keep = set(_field_steps(len(times), case.output.fields_every)) if case.output.fields else set()
-    if case.output.screenshot:  # the picture shows the step of peak thrust (breakthrough)
-        keep.add(int(np.argmax(dyn.thrust_N)))
-    rows: list[dict] = []
-
-    def observe(n, t, u):  # per-step response; the summary columns come from `rows`
-        rows.append(fe.response(system, u, patch, excl))
-        return {}
-
+    damping = (case.analysis.rayleigh_alpha_per_s, case.analysis.rayleigh_beta_s)
     amplitudes = np.column_stack([dyn.thrust_N, dyn.torque_Nmm])
+    keep = _kept_steps(case, len(times), int(np.argmax(dyn.thrust_N)))
+    recorder = fe.StepRecorder(channels, len(times), keep)
     if case.analysis.transient:
-        console.progress("dynamic loading: cutting + chip evacuation, Newmark average acceleration")
-        hist = fe.solve_transient(system, bc, patch.patterns, amplitudes, times,
-                                  damping=(case.analysis.rayleigh_alpha_per_s, case.analysis.rayleigh_beta_s),
-                                  keep=keep, observe=observe, quasi_static=True, console=console)
-        kept, linear_solver, amplification = hist.fields, hist.solver, hist.quasi_static
+        log.info("dynamic loading: cutting + chip evacuation, Newmark average acceleration")
+        march = fe.solve_transient(fs, patch.patterns, amplitudes, times, damping=damping, observer=recorder)
+        scheme, vectors, indicator = march.scheme, march.n_vectors, march.indicator
+        shapes = march.static_shapes
     else:
-        console.progress("dynamic loading: cutting + chip evacuation, quasi-static (no inertia)")
-        u_all = fe.solve_static(system, bc, patch.patterns @ amplitudes.T)
-        for n, t in enumerate(times):
-            observe(n, t, u_all[:, n])
-        kept = {n: u_all[:, n] for n in keep}
-        linear_solver, amplification = fe.static.stiffness_factor(system, bc).method, None
-    dynamic = _loading_result("dynamic", times, dyn.thrust_N, dyn.torque_Nmm, rows, system)
+        log.info("dynamic loading: cutting + chip evacuation, quasi-static (no inertia)")
+        march, shapes = None, fs.factor.solve(patch.patterns[fs.bc.free])
+        scheme, vectors, indicator = "quasi-static", shapes.shape[1], 0.0
+    basis = march.full_basis() if march is not None and march.scheme == "reduced" else \
+        fs.bc.expand(np.linalg.qr(shapes)[0])
+    projections = {ch.name: ch.project(basis) for ch in channels}
+    static_u = fs.bc.expand(shapes @ [loading.static_thrust_N, loading.static_torque_Nmm])
+    static_history = fe.reduced_history(channels, basis, (basis.T @ static_u)[:, None], projections)
+    static = LoadingResult.from_history("static", times[:1], [loading.static_thrust_N], [loading.static_torque_Nmm],
+                                        static_history)
+    static = _constant(static, times, loading)
+    if march is not None and march.scheme == "reduced":
+        dynamic_history = fe.reduced_history(channels, basis, march.coordinates, projections)
+        fields = {n: basis @ march.coordinates[:, n] for n in keep}
+    elif march is not None:
+        dynamic_history, fields = recorder.history(), recorder.fields
+    else:
+        coords = np.linalg.qr(shapes)[1] @ amplitudes.T  # basis = Q of shapes = Q R
+        dynamic_history = fe.reduced_history(channels, basis, coords, projections)
+        fields = {n: basis @ coords[:, n] for n in keep}
+    dynamic = LoadingResult.from_history("dynamic", times, dyn.thrust_N, dyn.torque_Nmm, dynamic_history)
     clock["dynamic"] = time.perf_counter()
 
-    modal = {}
+    dynamics = Dynamics(scheme, vectors, indicator)
     if case.analysis.modes:
-        console.progress(f"modal analysis: lowest {case.analysis.modes} modes")
-        modes = fe.solve_modal(system, bc, k=case.analysis.modes, console=console)
+        log.info("modal analysis: lowest %d modes", case.analysis.modes)
+        modes = fe.solve_modal(fs, k=case.analysis.modes)
         check = fe.step_check(float(modes.period_s[0]), case.time.step_s)
-        modal = {"frequencies_Hz": [float(f) for f in modes.frequency_Hz],
-                 "lowest_period_s": check["lowest_period_s"], "step_check": check["verdict"],
-                 "step_resolves_lowest_mode": check["verdict"] == "resolved",
-                 "dynamic_amplification": (amplification or {}).get("dynamic_amplification", 1.0)}
-    clock["modal"] = time.perf_counter()
+        dynamics = Dynamics(scheme, vectors, indicator, tuple(float(f) for f in modes.frequency_Hz), check)
+        clock["modal"] = time.perf_counter()
+        if case.analysis.resolved:
+            dynamics = _resolved(case, loading, fs, patch, channels, damping, dynamics)
+    clock["resolved"] = time.perf_counter()
 
-    summary = _summary(case, model, loading, system, patch, static, dynamic, modal, linear_solver, clock)
-    _write(out_dir, case, model, system, summary, static, dynamic, u_static, kept, times, console)
-    return summary
+    summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
+    summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the results
+    result = StudyResult(case, dynamic, static, dynamics, loading, summary, out_dir)
+    if out_dir is not None:
+        from femstudy.study.output import write_results
+
+        write_results(Path(out_dir), result, model, system, basis, projections["von_mises"], static_u, fields, times)
+    return result
 
 
-def _summary(case, model, loading, system, patch, static, dynamic, modal, linear_solver, clock) -> dict:
+def _constant(static: LoadingResult, times, loading: CaseLoading) -> LoadingResult:
+    """The static loading's single solution repeated on the time grid (its series are flat)."""
+    n = len(times)
+    return LoadingResult("static", np.asarray(times, float), np.full(n, loading.static_thrust_N),
+                         np.full(n, loading.static_torque_Nmm), {q: np.full(n, v[0]) for q, v in static.series.items()},
+                         static.peaks, static.region_peaks)
+
+
+def _kept_steps(case: Case, n_steps: int, peak_step: int) -> set:
+    """Steps whose full field is written (every fields_every-th and the last) and pictured."""
+    keep = set(range(0, n_steps, case.output.fields_every)) | {n_steps - 1} if case.output.fields else set()
+    if case.output.screenshot:
+        keep.add(peak_step)
+    return keep
+
+
+def _resolved(case, loading, fs, patch, channels, damping, dynamics: Dynamics) -> Dynamics:
+    """A transient whose step resolves the lowest mode, through breakthrough, with the loads'
+    per-flute oscillation and release; its peak deflection against the quasi-static one.
+
+    It starts at the window's first time from the quasi-static state, u0 = K⁻¹f(t0) and
+    v0 = K⁻¹ḟ(t0): up to there the loads change over seconds, so the response is that state
+    to within (f_load / f_1)² (~1 % for 50 Hz against a 560 Hz lowest mode)."""
+    period = dynamics.step_check.lowest_period_s
+    dt = period / case.analysis.steps_per_period
+    history = resolved_loading(case, loading, dt)
+    A = np.column_stack([history.thrust_N, history.torque_Nmm])
+    log.info("resolved transient: %d steps of %.3g ms (%d per lowest period) from %.2f to %.2f s, per-flute "
+             "oscillation and breakthrough release included", len(A) - 1, 1e3 * dt, case.analysis.steps_per_period,
+             history.time_s[0], history.time_s[-1])
+    u0, v0 = fs.solve(patch.patterns @ np.column_stack([A[0], (A[1] - A[0]) / dt])).T
+    march = fe.solve_transient(fs, patch.patterns, A, history.time_s, damping=damping, u0=u0, v0=v0,
+                               rtol=RESOLVED_RTOL)
+    cheap = [ch for ch in channels if ch.name in ("deflection", "drill_point")]
+    if march.scheme == "reduced":
+        stiffness = march.basis.T @ (fs.K @ march.basis)
+        resolved = fe.reduced_history(cheap, march.full_basis(), march.coordinates, metric=stiffness)
+    else:  # stepped: nothing kept; measure the resolved run again through a recorder
+        recorder = fe.StepRecorder(cheap, len(A))
+        march = fe.solve_transient(fs, patch.patterns, A, history.time_s, damping=damping, u0=u0, v0=v0,
+                                   observer=recorder, scheme="stepping")
+        resolved = recorder.history()
+    Q, R = np.linalg.qr(march.static_shapes)  # the quasi-static response K⁻¹P a(t) = Q (R a(t))
+    quasi = fe.reduced_history(cheap, fs.bc.expand(Q), R @ A.T, metric=Q.T @ (fs.K @ Q))
+    return Dynamics(**{**dynamics.__dict__, "resolved_step_s": dt, "resolved_steps": len(A) - 1,
+                       "resolved_window_s": (float(history.time_s[0]), float(history.time_s[-1])),
+                       "resolved_vectors": march.n_vectors, "resolved_indicator": march.indicator,
+                       "resolved_peak_mm": resolved["deflection"].peak,
+                       "quasi_static_peak_mm": quasi["deflection"].peak,
+                       "resolved_drill_point_mm": resolved["drill_point"].peak,
+                       "quasi_static_drill_point_mm": quasi["drill_point"].peak,
+                       "flute_passing_Hz": loading.conditions.drill.flute_passing_hz(case.drilling.spindle_rpm)})
+
+
+def _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock) -> dict:
     cond = loading.conditions
     mu_f, mu_w = cond.friction
     site = model.site
+    timing = {"mesh_s": clock["mesh"] - clock["start"], "assembly_s": clock["assembly"] - clock["mesh"],
+              "factor_s": clock["factor"] - clock["assembly"], "dynamic_s": clock["dynamic"] - clock["factor"],
+              "modal_s": clock.get("modal", clock["dynamic"]) - clock["dynamic"],
+              "resolved_s": clock["resolved"] - clock.get("modal", clock["dynamic"])}
     return {
         "femstudy_version": __version__, "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "versions": versions(),
         "case_file": str(case.source) if case.source else None,
         "case": case.model_dump(mode="json"),
-        "mesh": {**{k: v for k, v in model.stats.items()}, "quality": model.quality,
-                 "surface": case.geometry.surface, "length_mm": float(model.frame.length_mm)},
+        "mesh": {**model.stats, "quality": model.quality, "surface": case.geometry.surface,
+                 "length_mm": float(model.frame.length_mm)},
         "site": {"name": case.site.name, "entry_point_mm": [float(x) for x in site.entry_point],
                  "direction": [float(x) for x in site.direction],
                  "outward_normal": [float(x) for x in site.outward_normal],
@@ -160,55 +347,15 @@ def _summary(case, model, loading, system, patch, static, dynamic, modal, linear
                     "mu_f": mu_f, "mu_w": mu_w, "growth_exponent": cond.growth_exponent,
                     "depth_mm": loading.depth_mm, "static_thrust_N": loading.static_thrust_N,
                     "static_torque_Nmm": loading.static_torque_Nmm,
-                    "peak_thrust_N": float(dynamic.thrust_N.max()), "peak_torque_Nmm": float(dynamic.torque_Nmm.max()),
+                    "peak_thrust_N": float(loading.dynamic.thrust_N.max()),
+                    "peak_torque_Nmm": float(loading.dynamic.torque_Nmm.max()),
                     "breakthrough_s": cond.phase_times()["breakthrough"]},
-        "solver": {"element_order": system.order, "dofs": system.n_dofs, "linear_solver": linear_solver,
+        "solver": {"element_order": system.order, "dofs": system.n_dofs, "linear_solver": fs.method,
+                   "factorisations": 1 + (dynamics.scheme == "stepping") + (
+                       dynamics.resolved_indicator is not None and np.isnan(dynamics.resolved_indicator)),
                    "assembly": system.timings},
-        "modal": modal,
+        "dynamics": dynamics.as_dict(),
         "results": comparison(dynamic, static),
         "margins": {"dynamic": dynamic.margins(), "static": static.margins()},
-        "timings": {"mesh_s": clock["mesh"] - clock["start"], "assembly_s": clock["assembly"] - clock["mesh"],
-                    "static_s": clock["static"] - clock["assembly"], "dynamic_s": clock["dynamic"] - clock["static"],
-                    "modal_s": clock["modal"] - clock["dynamic"], "total_s": time.perf_counter() - clock["start"]},
+        "timings": timing,
     }
-
-
-def _write(out_dir, case, model, system, summary, static, dynamic, u_static, kept, times, console) -> None:
-    from femstudy import fe
-
-    console.progress(f"writing results to {out_dir}")
-    warp = render.nice_warp_factor(summary["results"]["max_deflection_mm"]["dynamic"]["value"],
-                                   summary["mesh"]["length_mm"])
-    summary["figures"] = {"warp_factor": warp}
-    with atomic.atomic_folder(out_dir) as tmp:
-        (tmp / "timeseries.csv").write_text(timeseries_csv([dynamic, static]))
-        if case.output.figures:
-            summary["figures"]["files"] = figures.write_figures(tmp, case.name, [dynamic, static])
-        base = fields.grid(system.nodes, system.cells, system.region, model.frame.up)
-        if case.output.fields:
-            field_steps = set(_field_steps(len(times), case.output.fields_every))
-            frames = [(float(times[n]), fields.with_solution(base, u, fe.von_mises_nodal(system, u), system.cells))
-                      for n, u in sorted(kept.items()) if n in field_steps]
-            fields.write_series(tmp / "fields", "dynamic", frames)
-            static_grid = fields.with_solution(base, u_static, fe.von_mises_nodal(system, u_static), system.cells)
-            fields.write_series(tmp / "fields", "static", [(0.0, static_grid)])
-        if case.output.screenshot and kept:
-            peak_step = int(np.argmax(dynamic.max_deflection_mm))
-            step = min(kept, key=lambda n: abs(n - peak_step))
-            g = fields.with_solution(base, kept[step], fe.von_mises_nodal(system, kept[step]), system.cells)
-            render.deformed_picture(tmp / "femur.png", g, model.site.entry_point, model.site.direction, warp,
-                                    f"{case.name}: dynamic loading, t = {times[step]:.2f} s")
-            summary["figures"].setdefault("files", []).append("femur.png")
-        summary["figures"]["fields"] = ["fields/dynamic.pvd", "fields/static.pvd"] if case.output.fields else []
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
-        (tmp / "report.md").write_text(report.run_report(summary))
-
-
-def _json_default(value):
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"cannot write {type(value).__name__} to JSON")

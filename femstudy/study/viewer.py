@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
-import sys
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +15,7 @@ SCALAR_TITLES = {"von_mises_MPa": "von Mises [MPa]", "displacement_magnitude_mm"
                  "region": "region (1 cortical, 2/3 cancellous)"}
 
 
-def has_display() -> bool:
-    """True when an interactive window can be opened."""
-    return sys.platform in ("win32", "darwin") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+log = logging.getLogger(__name__)
 
 
 def _read(results: Path, loading: str):
@@ -44,8 +41,9 @@ def _frame(reader, time_s: float):
 
 
 def view(results: Path, loading: str = "dynamic", time_s: float | None = None, field: str = "von_mises_MPa",
-         warp: float | None = None, screenshot: Path | None = None) -> None:
-    """Show one loading of a results folder; write ``screenshot`` (PNG) when asked or headless."""
+         warp: float | None = None, screenshot: Path | None = None, interactive: bool = True) -> Path | None:
+    """Show one loading of a results folder in a window, or write ``screenshot`` (PNG) when
+    asked or when ``interactive`` is false (no display); returns the picture written."""
     summary, reader = _read(Path(results), loading)
     site = summary["site"]
     peak = summary["results"]["max_deflection_mm"][loading]
@@ -54,18 +52,18 @@ def view(results: Path, loading: str = "dynamic", time_s: float | None = None, f
     if time_s is None:
         time_s = peak["time_s"]
     title = f"{summary['case']['name']}: {loading} loading"
-    if screenshot is None and not has_display():
+    if screenshot is None and not interactive:
         screenshot = Path(results) / f"view-{loading}-{field}.png"
-        print(f"no display: writing {screenshot}", file=sys.stderr)
+        log.info("no display: writing %s", screenshot)
     if screenshot is not None:
         grid, shown = _frame(reader, time_s)
         if field == "region":
             grid = grid.cell_data_to_point_data(pass_cell_data=True)
         deformed_picture(screenshot, grid, site["entry_point_mm"], site["direction"], warp,
                          f"{title}, t = {shown:.2f} s", scalars=field, scalar_title=SCALAR_TITLES[field])
-        print(f"wrote {screenshot}")
-        return
+        return screenshot
     _interactive(reader, site, warp, title, field)
+    return None
 
 
 def _interactive(reader, site, warp, title, field):  # pragma: no cover - needs a display

@@ -4,12 +4,14 @@ Every finished point is written at once and atomically as ``points/<id>.json``; 
 started again skips the points whose file exists and matches, so a sweep killed part-way
 loses only the points that were running. Locally, points are admitted only while their
 estimated memory fits the machine (so two near-1M-DOF factorisations never run at once on
-24 GB), and the BLAS/PARDISO threads are split between the workers.
+24 GB), and the BLAS/MKL threads are split between the workers (threadpoolctl, set in each
+worker process when it starts).
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import os
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
@@ -18,10 +20,9 @@ from pathlib import Path
 from typing import Callable
 
 from femstudy import atomic
-from femstudy.console import Console
 from femstudy.errors import UserError
 
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -69,67 +70,74 @@ def _store(folder: Path, point: Point, result: dict) -> dict:
 
 def execute(points: list[Point], folder: Path, evaluate: Callable, args: tuple = (), *, workers: int = 1,
             scheduler: str | None = None, memory_bytes: Callable | None = None,
-            memory_budget_bytes: float | None = None, console: Console | None = None) -> list[dict]:
+            memory_budget_bytes: float | None = None) -> list[dict]:
     """Evaluate ``evaluate(point, *args) -> dict`` for every point not finished in ``folder``.
 
     Returns the records of all points, in the order given. ``memory_bytes(point)`` estimates
     a point's peak memory for local admission control.
     """
-    console = console or Console()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     finished = _load_finished(folder, points)
     todo = [p for p in points if p.id not in finished]
-    console.progress(f"{len(finished)} of {len(points)} points already finished; computing {len(todo)}"
-                     + (f" on {scheduler}" if scheduler else f" with {workers} worker{'s' * (workers > 1)}"))
+    log.info("%d of %d points already finished; computing %d%s", len(finished), len(points), len(todo),
+             f" on {scheduler}" if scheduler else f" with {workers} worker{'s' * (workers > 1)}")
     if todo:
         if scheduler:
-            _run_dask(todo, folder, evaluate, args, scheduler, finished, console)
+            _run_dask(todo, folder, evaluate, args, scheduler, finished)
         elif workers <= 1:
             for k, point in enumerate(todo, 1):
                 finished[point.id] = _store(folder, point, evaluate(point, *args))
-                console.progress(f"point {k}/{len(todo)} done: {point.label}")
+                _done(point, len(finished), len(points))
         else:
-            _run_pool(todo, folder, evaluate, args, workers, memory_bytes, memory_budget_bytes, finished, console)
+            _run_pool(todo, folder, evaluate, args, workers, memory_bytes, memory_budget_bytes, finished,
+                      len(points))
     return [finished[p.id] for p in points]
 
 
-def _run_pool(todo, folder, evaluate, args, workers, memory_bytes, budget, finished, console) -> None:
+def _done(point: Point, finished: int, total: int) -> None:
+    log.info("point done (%d of %d finished): %s", finished, total, point.label,
+             extra={"progress": ("sweep points", finished, total)})
+
+
+def _limit_threads(threads: int) -> None:
+    """Worker start-up: load the linear-algebra runtimes, then limit their threads."""
+    from threadpoolctl import threadpool_limits
+
+    from femstudy.fe.linsolve import load_runtimes
+
+    load_runtimes()
+    threadpool_limits(limits=threads)
+
+
+def _run_pool(todo, folder, evaluate, args, workers, memory_bytes, budget, finished, total) -> None:
     import psutil
 
     budget = budget or 0.8 * psutil.virtual_memory().available
     need = {p.id: (memory_bytes(p) if memory_bytes else 0.0) for p in todo}
     for point in todo:
         if need[point.id] > budget:
-            console.warn(f"point {point.label} may need {need[point.id] / 1e9:.1f} GB, more than the "
-                         f"{budget / 1e9:.1f} GB available; it will run alone")
+            log.warning("point %s may need %.1f GB, more than the %.1f GB available; it will run alone",
+                        point.label, need[point.id] / 1e9, budget / 1e9)
     queue = sorted(todo, key=lambda p: -need[p.id])
-    threads = str(max(1, (os.cpu_count() or 1) // workers))
-    saved = {k: os.environ.get(k) for k in THREAD_VARIABLES}
-    os.environ.update({k: threads for k in THREAD_VARIABLES})
-    try:
-        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            running: dict = {}
-            while queue or running:
-                in_use = sum(need[p.id] for p in running.values())
-                for point in list(queue):
-                    if len(running) >= workers:
-                        break
-                    if not running or in_use + need[point.id] <= budget:
-                        running[pool.submit(evaluate, point, *args)] = point
-                        in_use += need[point.id]
-                        queue.remove(point)
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for future in done:
-                    point = running.pop(future)
-                    finished[point.id] = _store(folder, point, _result(future, point))
-                    console.progress(f"point done ({len(finished)} finished): {point.label}")
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=_limit_threads,
+                             initargs=(threads,)) as pool:
+        running: dict = {}
+        while queue or running:
+            in_use = sum(need[p.id] for p in running.values())
+            for point in list(queue):
+                if len(running) >= workers:
+                    break
+                if not running or in_use + need[point.id] <= budget:
+                    running[pool.submit(evaluate, point, *args)] = point
+                    in_use += need[point.id]
+                    queue.remove(point)
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                point = running.pop(future)
+                finished[point.id] = _store(folder, point, _result(future, point))
+                _done(point, len(finished), total)
 
 
 def _result(future, point: Point) -> dict:
@@ -139,7 +147,7 @@ def _result(future, point: Point) -> dict:
         raise UserError(f"sweep point {point.label}: {exc}") from None
 
 
-def _run_dask(todo, folder, evaluate, args, scheduler, finished, console) -> None:
+def _run_dask(todo, folder, evaluate, args, scheduler, finished) -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -148,10 +156,11 @@ def _run_dask(todo, folder, evaluate, args, scheduler, finished, console) -> Non
         client = Client(scheduler, timeout="20s")
     except (OSError, TimeoutError) as exc:
         raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+    total = len(finished) + len(todo)
     with client:
         futures = {client.submit(evaluate, point, *args, pure=False, key=f"femstudy-{point.id}"): point
                    for point in todo}
         for future in as_completed(futures):
             point = futures[future]
             finished[point.id] = _store(folder, point, _result(future, point))
-            console.progress(f"point done ({len(finished)} finished): {point.label}")
+            _done(point, len(finished), total)

@@ -9,14 +9,15 @@ from pathlib import Path
 import numpy as np
 
 from femstudy import atomic
-from femstudy.sweep.convergence import assess, coarsest_meeting_target
+from femstudy.sweeps.convergence import assess, coarsest_meeting_target
 
-MESH_COLUMNS = ["size_mm", "order", "refine", "site_size_mm", "envelope", "nodes", "elements", "dofs", "h_rep_mm",
+MESH_COLUMNS = ["point", "size_mm", "order", "refine", "site_size_mm", "envelope", "nodes", "elements", "dofs", "h_rep_mm",
                 "max_deflection_mm", "drill_point_deflection_mm", "max_von_mises_MPa",
                 "max_von_mises_excl_MPa", "mesh_s", "tetwild_s", "mesh_cache_hit", "assembly_s", "solve_s"]
-#: quantity -> (formal order for P1, for P2, singular at the patch edge?)
-QUANTITIES = {"max_deflection_mm": (2, 3, False), "drill_point_deflection_mm": (2, 3, False),
-              "max_von_mises_MPa": (1, 2, True), "max_von_mises_excl_MPa": (1, 2, False)}
+#: quantity -> (formal order for P1, for P2, singular in the continuum?, local?). A local
+#: quantity's mesh measure is the drill site's element size, a global one's (V/N)^(1/3).
+QUANTITIES = {"max_deflection_mm": (2, 3, False, False), "drill_point_deflection_mm": (2, 3, False, False),
+              "max_von_mises_MPa": (1, 2, True, True), "max_von_mises_excl_MPa": (1, 2, False, False)}
 
 
 def table_csv(rows: list[dict], columns: list[str]) -> str:
@@ -40,35 +41,64 @@ def table_markdown(rows: list[dict], columns: list[str]) -> str:
 
 
 def groups(rows: list[dict]) -> dict[tuple, list[dict]]:
-    """Mesh rows grouped by (order, refine), each sorted fine to coarse."""
+    """Mesh rows grouped by (order, refine), each sorted fine to coarse; a size met twice (the
+    remeshed point) is kept once."""
     out: dict[tuple, list[dict]] = {}
     for row in rows:
-        out.setdefault((row["order"], row["refine"]), []).append(row)
+        group = out.setdefault((row["order"], row["refine"]), [])
+        if all(r["size_mm"] != row["size_mm"] for r in group):
+            group.append(row)
     return {k: sorted(v, key=lambda r: r["h_rep_mm"]) for k, v in sorted(out.items())}
 
 
-def convergence(rows: list[dict], target: float) -> dict:
-    """Per group and quantity: the assessment from the three finest meshes, and the
-    coarsest global size whose max deflection is within ``target`` of the extrapolated value."""
+def remeshing_noise(rows: list[dict], quantities) -> dict:
+    """Per (order, refine) group and quantity, the relative difference |a − b| / min(|a|, |b|)
+    between two meshes of one size (the remeshed point and its original); 0 without a pair."""
+    out: dict = {}
+    for row in rows:
+        twin = next((r for r in rows if r is not row and r["order"] == row["order"] and r["refine"] == row["refine"]
+                     and r["size_mm"] == row["size_mm"]), None)
+        group = out.setdefault(f"P{row['order']}-{row['refine']}", {q: 0.0 for q in quantities})
+        if twin is not None:
+            for q in quantities:
+                a, b = row.get(q), twin.get(q)
+                if a is not None and b is not None and a != 0 and np.isfinite(a) and np.isfinite(b):
+                    group[q] = max(group[q], abs(a - b) / abs(a))
+    return out
+
+
+def mesh_measure(row: dict, local: bool) -> float:
+    """The mesh size [mm] a quantity converges with: the site's element size for a local one
+    (when the site is refined), the representative (V/N)^(1/3) otherwise."""
+    return row["site_size_mm"] if local and row.get("site_size_mm") else row["h_rep_mm"]
+
+
+def convergence(rows: list[dict], target: float, quantities: dict = QUANTITIES) -> dict:
+    """Per group and quantity: the assessment from the three finest meshes against the
+    measured remeshing noise, and the coarsest global size whose max deflection is within
+    ``target`` of the extrapolated value."""
+    noise = remeshing_noise(rows, quantities)
     out = {}
     for (order, refine), group in groups(rows).items():
-        entry = {"points": len(group), "quantities": {}}
+        name = f"P{order}-{refine}"
+        entry = {"points": len(group), "quantities": {}, "remeshing_noise": noise.get(name, {})}
         if len(group) >= 3:
-            h = [r["h_rep_mm"] for r in group]
-            for quantity, (p1, p2, singular) in QUANTITIES.items():
-                values = [r[quantity] for r in group]
+            for quantity, (p1, p2, singular, local) in quantities.items():
+                values = [r.get(quantity) for r in group]
                 if any(v is None or not np.isfinite(v) for v in values):
                     continue
-                a = assess(quantity, h, values, expected_order=p2 if order == 2 else p1, singular_hint=singular)
+                h = [mesh_measure(r, local) for r in group]
+                a = assess(quantity, h, values, formal_order=p2 if order == 2 else p1, singular=singular,
+                           noise=noise.get(name, {}).get(quantity, 0.0))
                 entry["quantities"][quantity] = a.as_dict()
             deflection = entry["quantities"].get("max_deflection_mm")
-            if deflection and deflection["extrapolated"] is not None and deflection["verdict"] != "not converging":
+            if deflection and deflection["extrapolated"] is not None and deflection["verdict"] in ("converged", "converging"):
                 best = coarsest_meeting_target([r["size_mm"] for r in group],
                                                [r["max_deflection_mm"] for r in group],
                                                deflection["extrapolated"], target)
                 entry["recommended_size_mm"] = best[0] if best else None
                 entry["recommended_error"] = best[1] if best else None
-        out[f"P{order}-{refine}"] = entry
+        out[name] = entry
     return out
 
 
@@ -79,14 +109,16 @@ def convergence_markdown(assessment: dict, target: float) -> str:
         if not entry["quantities"]:
             lines += [f"{entry['points']} point(s): at least three are needed for an observed order.", ""]
             continue
-        lines += ["| quantity | finest values | observed order | extrapolated | GCI (fine) | verdict |",
-                  "|---|---|---|---|---|---|"]
+        lines += ["| quantity | mesh measure h [mm] | finest values | remeshing noise | observed order | extrapolated "
+                  "| GCI (fine) | verdict |", "|---|---|---|---|---|---|---|---|"]
         for q, a in entry["quantities"].items():
             order = "–" if a["observed_order"] is None else f"{a['observed_order']:.2f}"
             ext = "–" if a["extrapolated"] is None else f"{a['extrapolated']:.5g}"
             gci = "–" if a["gci_fine"] is None else f"{100 * a['gci_fine']:.2f} %"
             vals = ", ".join(f"{v:.5g}" for v in a["values"])
-            lines.append(f"| {q} | {vals} | {order} | {ext} | {gci} | {a['verdict']}: {a['reason']} |")
+            hs = ", ".join(f"{x:.3g}" for x in a["h"])
+            lines.append(f"| {q} | {hs} | {vals} | {100 * a['noise']:.2f} % | {order} | {ext} | {gci} | "
+                         f"{a['verdict']}: {a['reason']} |")
         size = entry.get("recommended_size_mm")
         lines += ["", f"Recommended global size: **{size:g} mm** (max deflection within "
                       f"{100 * entry['recommended_error']:.2f} % of the extrapolated value; target {100 * target:g} %)."
@@ -111,7 +143,7 @@ def plots(folder: Path, rows: list[dict], assessment: dict) -> list[str]:
                 ax.plot(*zip(*pts), marker="o", label=f"P{order}, {refine}")
                 verdict = assessment[f"P{order}-{refine}"]["quantities"].get(quantity, {})
                 extrapolated = verdict.get("extrapolated")
-                if extrapolated is not None and verdict.get("verdict") != "not converging":
+                if extrapolated is not None and verdict.get("verdict") in ("converged", "converging"):
                     ax.axhline(extrapolated, ls=":", lw=1, color=ax.lines[-1].get_color())
             ax.set_xscale("log")
             if x_key == "size_mm":

@@ -1,0 +1,126 @@
+"""Excel .xlsx recordings, read and written with openpyxl.
+
+The data sheet is the one named ``recording`` or ``data``, else the first. In it, as in a
+text export: an optional header block of ``key | value`` rows, a row of column names
+(``time [s]``, ``Fz [kN]``, ``thrust_N``), an optional row of units, then rows of numbers.
+Metadata are the header block's rows and the ``key | value`` rows of a sheet named
+``metadata``, which win. Lists are written as TOML text.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from femstudy import atomic
+from femstudy.errors import UserError
+from femstudy.recordings.formats.table import Table
+from femstudy.recordings.metadata import format_header_value, plain_value
+from femstudy.recordings.units import is_units_row
+
+ZIP_SIGNATURE = b"PK\x03\x04"
+DATA_SHEETS = ("recording", "data")
+METADATA_SHEET = "metadata"
+
+
+def read_table(path: Path, source: str) -> Table:
+    """An .xlsx recording as a :class:`Table` (see the module docstring)."""
+    import openpyxl
+
+    try:
+        with path.open("rb") as stream:  # a stream, so that openpyxl does not insist on the suffix
+            book = openpyxl.load_workbook(stream, read_only=True, data_only=True)
+            sheets = {ws.title: [list(row) for row in ws.iter_rows(values_only=True)] for ws in book.worksheets}
+            book.close()
+    except OSError:
+        raise
+    except Exception as exc:  # openpyxl raises BadZipFile, KeyError, InvalidFileException ... on a damaged file
+        raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({type(exc).__name__}: "
+                        f"{exc})") from None
+    titles = {t.lower(): t for t in sheets}
+    data_title = next((titles[t] for t in DATA_SHEETS if t in titles), next(iter(sheets), None))
+    rows = sheets.get(data_title) or []
+    first = next((k for k, row in enumerate(rows) if _is_number_row(row)), None)
+    if first is None:
+        raise UserError(f"recording {source}: sheet '{data_title}' has no row of numbers (expected column "
+                        f"names such as 'time [s]', 'thrust [N]' over rows of numbers)")
+    above = [(k, row) for k, row in enumerate(rows[:first]) if any(c not in (None, "") for c in row)]
+    if not above:
+        raise UserError(f"recording {source}: sheet '{data_title}' has no row of column names above its numbers")
+    names_at, units_row = above[-1], None
+    if len(above) >= 2 and _is_units_row(above[-1][1]):
+        names_at, units_row = above[-2], above[-1][1]
+    names = [_text(c) for c in names_at[1]]
+    units = [(_text(units_row[k]) or None) if units_row and k < len(units_row) else None for k in range(len(names))]
+    metadata, origins = {}, {}
+    for k, row in above[: above.index(names_at)]:
+        _key_value(row, metadata, origins, f"sheet '{data_title}' row {k + 1}")
+    for k, row in enumerate(sheets.get(titles.get(METADATA_SHEET, ""), [])):
+        _key_value(row, metadata, origins, f"sheet '{titles[METADATA_SHEET]}' row {k + 1}")
+    numbered = [(first + 1 + r, row) for r, row in enumerate(rows[first:]) if any(c not in (None, "") for c in row)]
+    return Table(names=names, units=units, metadata=metadata, origins=origins,
+                 load=lambda indices: _columns(numbered, indices, names, source),
+                 where=lambda row: f"row {numbered[row][0]}",
+                 how_to_add="add a row '{key} | value' to its metadata sheet")
+
+
+def _text(cell) -> str:
+    return "" if cell is None else str(cell).strip()
+
+
+def _is_number(cell) -> bool:
+    return isinstance(cell, (int, float)) and not isinstance(cell, bool)
+
+
+def _is_number_row(row) -> bool:
+    cells = [c for c in row if c not in (None, "")]
+    return len(cells) >= 2 and all(_is_number(c) for c in cells)
+
+
+def _is_units_row(row) -> bool:
+    return is_units_row([_text(c) for c in row])
+
+
+def _key_value(row, metadata: dict, origins: dict, where: str) -> None:
+    """A ``key | value`` row into ``metadata`` (an empty value is the empty text)."""
+    cells = list(row) + [None, None]
+    key = _text(cells[0])
+    if key and key.replace("_", "a").isalnum() and not key[0].isdigit():
+        value = cells[1]
+        metadata[key] = "" if value is None else plain_value(value)
+        origins[key] = where
+
+
+def _columns(numbered, indices: list[int], names, source: str) -> list[np.ndarray]:
+    """The used columns of the (sheet row number, row) pairs as floats; an empty or
+    non-number cell is an error naming its row."""
+    out = []
+    for k in indices:
+        values = np.empty(len(numbered))
+        for r, (number, row) in enumerate(numbered):
+            cell = row[k] if k < len(row) else None
+            if not _is_number(cell):
+                shown = "an empty cell" if cell in (None, "") else repr(cell)
+                raise UserError(f"recording {source}, row {number}: {shown} in column '{names[k]}' is not a number")
+            values[r] = cell
+        out.append(values)
+    return out
+
+
+def write_table(path, columns: list[tuple[str, str, np.ndarray]], metadata: dict) -> None:
+    """Write a sheet ``recording`` (names ``time [s]``, ``thrust [N]`` ... over the numbers)
+    and a sheet ``metadata`` of ``key | value`` rows (atomically)."""
+    import openpyxl
+
+    book = openpyxl.Workbook(write_only=True)
+    sheet = book.create_sheet("recording")
+    sheet.append([f"{quantity} [{unit}]" for quantity, unit, _ in columns])
+    for row in np.column_stack([c[2] for c in columns]).tolist():
+        sheet.append(row)
+    meta = book.create_sheet(METADATA_SHEET)
+    for key, value in metadata.items():
+        meta.append([key, format_header_value(value) if isinstance(value, (list, tuple)) else value])
+    with atomic.atomic_path(path) as tmp:
+        with open(tmp, "wb") as stream:
+            book.save(stream)

@@ -1,0 +1,178 @@
+"""``sweep``: a mesh-convergence ladder of a case, or a parameter sweep file, run to a folder.
+
+Points run locally one after another, in a process pool (``workers``) or on a Dask cluster
+(``scheduler``), resumably (femstudy.sweeps.execute). With several workers the femur meshes
+are built here first, so that workers read them from ``cache_dir`` (TetWild is not
+deterministic) and so that each point's memory is known from its DOFs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from femstudy import atomic
+from femstudy.errors import UserError, require
+from femstudy.meshing.cache import DEFAULT_CACHE_DIR
+from femstudy.sweeps import report
+
+log = logging.getLogger(__name__)
+
+#: Columns of a parameter sweep's table after the swept keys.
+STUDY_COLUMNS = ["mu_f", "mu_w", "peak_thrust_N", "peak_torque_Nmm", "max_deflection_mm_dynamic",
+                 "max_deflection_mm_static", "max_deflection_mm_ratio", "max_von_mises_MPa_dynamic",
+                 "max_von_mises_excl_MPa_dynamic", "max_von_mises_MPa_ratio", "dofs", "total_s"]
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """A finished sweep.
+
+    kind        : "mesh" (convergence ladder) or "parameter"
+    rows        : one dict per point, units in the keys (the table's rows)
+    columns     : the table's columns
+    convergence : per (order, refinement) group, per quantity, the assessment (mesh sweeps)
+    folder      : where sweep.csv, sweep.md (and convergence.json, figures) were written
+    text        : sweep.md's content
+    """
+
+    kind: str
+    rows: list
+    columns: list
+    convergence: dict
+    folder: Path
+    text: str
+
+    def to_json(self) -> dict:
+        return {"kind": self.kind, "rows": self.rows, "convergence": self.convergence, "folder": str(self.folder)}
+
+
+def sweep(file: Path, sizes: list[float] | None = None, *, order: str = "2", refine: str = "site",
+          target: float = 0.02, workers: int = 1, scheduler: str | None = None, out: Path | None = None,
+          cache_dir: Path = DEFAULT_CACHE_DIR, solver: str = "auto", bones_dir: Path | None = None) -> SweepResult:
+    """Run a mesh-convergence sweep of a case file (``sizes`` given) or a parameter sweep file.
+
+    Parameters
+    ----------
+    file : Path
+        A case file (with ``sizes``) or a sweep file (``case = ...``, ``[grid]``/``[[point]]``).
+    sizes : list of float, optional
+        Global element sizes [mm] of a mesh sweep.
+    order : {"1", "2", "both"}
+    refine : {"site", "uniform", "both"}
+    target : float
+        Relative error on max deflection for the recommended size.
+    workers, scheduler
+        Local worker processes, or a Dask scheduler address.
+    out : Path, optional
+        Sweep folder (default results/sweep-<name>).
+    cache_dir, solver, bones_dir
+        As for :func:`femstudy.run_study`.
+
+    Returns
+    -------
+    SweepResult
+
+    Examples
+    --------
+    >>> result = sweep(Path("cases/middiaphysis.toml"), [16, 12, 8])   # doctest: +SKIP
+    >>> result.convergence["P2-site"]["quantities"]["max_deflection_mm"]["verdict"]   # doctest: +SKIP
+    'converged'
+    """
+    require(Path(file).is_file(), f"{file} does not exist")
+    require(workers >= 1, f"--workers must be at least 1, got {workers}")
+    require(0 < target < 1, f"--target is a relative error in (0, 1), got {target}")
+    try:
+        is_sweep_file = "case" in tomllib.loads(Path(file).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"cannot read {file}: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{file}: TOML syntax error: {exc}") from None
+    options = dict(workers=workers, scheduler=scheduler, cache_dir=Path(cache_dir), solver=solver, bones_dir=bones_dir)
+    if is_sweep_file:
+        require(sizes is None, "--sizes belongs to a mesh sweep of a case file, not to a sweep file")
+        return _parameter_sweep(Path(file), out, options)
+    require(sizes is not None, "a mesh-convergence sweep needs --sizes, e.g. --sizes 32,16,8,6,4")
+    return _mesh_sweep(Path(file), sizes, order, refine, target, out, options)
+
+
+def _execute(points, case, case_path: Path, folder: Path, options: dict, runs=None):
+    from femstudy.sweeps import points as point_functions
+    from femstudy.sweeps.execute import execute
+
+    memory = None
+    if options["workers"] > 1 or options["scheduler"]:  # workers then read the meshes built here
+        memory = _mesh_first(points, case, options["cache_dir"])
+    text = case_path.read_text(encoding="utf-8")
+    # finished points are reused only for the same case text: editing the case starts afresh
+    digest = hashlib.sha256(text.encode()).hexdigest()[:12]
+    context = point_functions.Context(text, str(case_path.resolve()), runs and str(Path(runs).resolve()),
+                                      str(Path(options["cache_dir"]).resolve()), options["solver"],
+                                      options["bones_dir"] and str(Path(options["bones_dir"]).resolve()))
+    return execute(points, folder / f"points-{digest}", point_functions.evaluate, (context,),
+                   workers=options["workers"], scheduler=options["scheduler"], memory_bytes=memory)
+
+
+def _mesh_first(points, case, cache_dir: Path):
+    """Build (or load) every point's mesh before solving, so memory is known from DOFs."""
+    from femstudy.casefile import with_overrides
+    from femstudy.study.femur import femur_model
+    from femstudy.study.feasibility import factorisation_bytes
+    from femstudy.sweeps.points import estimated_dofs
+
+    need = {}
+    for k, point in enumerate(points, 1):
+        log.info("mesh %d/%d: %s", k, len(points), point.label, extra={"progress": ("meshes", k, len(points))})
+        c = with_overrides(case, point.overrides)
+        model = femur_model(c, cache_dir)
+        need[point.id] = factorisation_bytes(estimated_dofs(model.mesh.n_points, model.mesh.n_tets, c.mesh.order))
+    return lambda point: need[point.id]
+
+
+def _mesh_sweep(case_path: Path, sizes, order, refine, target, out, options) -> SweepResult:
+    from femstudy.casefile import load_case
+    from femstudy.sweeps.spec import mesh_points
+
+    case = load_case(case_path, options["bones_dir"])
+    orders = [1, 2] if order == "both" else [int(order)]
+    refines = ["site", "uniform"] if refine == "both" else [refine]
+    points = mesh_points(case, sizes, orders, refines)
+    folder = out or Path("results") / f"sweep-{case.name}"
+    rows = [{"point": r["point"]["label"], **r["result"]} for r in _execute(points, case, case_path, folder, options)]
+    assessment = report.convergence(rows, target)
+    atomic.write_text(folder / "sweep.csv", report.table_csv(rows, report.MESH_COLUMNS))
+    atomic.write_text(folder / "convergence.json", json.dumps(assessment, indent=2, default=float))
+    figures = report.plots(folder, rows, assessment)
+    text = "\n".join([f"# Mesh convergence: {case.name}", "",
+                      f"Static solve under the peak dynamic drilling load; site size scaled with the global size. "
+                      f"Sizes {', '.join(f'{s:g}' for s in sorted(set(sizes), reverse=True))} mm; the middle size "
+                      "meshed twice (\"remeshed\") to measure TetWild's remeshing noise.", "",
+                      report.table_markdown(rows, report.MESH_COLUMNS), "", "## Convergence (three finest meshes)", "",
+                      report.convergence_markdown(assessment, target), "",
+                      " ".join(f"![{f}]({f})" for f in figures), ""])
+    atomic.write_text(folder / "sweep.md", text)
+    return SweepResult("mesh", rows, report.MESH_COLUMNS, assessment, folder, text)
+
+
+def _parameter_sweep(path: Path, out, options) -> SweepResult:
+    from femstudy.casefile import load_case, with_overrides
+    from femstudy.sweeps.spec import read_parameter_sweep
+
+    name, case_path, points = read_parameter_sweep(path)
+    case = load_case(case_path, options["bones_dir"])
+    for p in points:  # validate every point before any work
+        with_overrides(case, p.overrides)
+    folder = out or Path("results") / f"sweep-{name}"
+    records = _execute(points, case, case_path, folder, options, runs=str(folder / "runs"))
+    keys = list(dict.fromkeys(k for r in records for k in r["point"]["overrides"]))
+    rows = [{**r["point"]["overrides"], **r["result"]} for r in records]
+    columns = keys + STUDY_COLUMNS
+    atomic.write_text(folder / "sweep.csv", report.table_csv(rows, columns))
+    table = report.table_markdown(rows, columns)
+    text = f"# Parameter sweep: {name}\n\nCase {case_path}\n\n{table}\n"
+    atomic.write_text(folder / "sweep.md", text)
+    return SweepResult("parameter", rows, columns, {}, folder, text)
