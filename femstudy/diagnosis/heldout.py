@@ -3,8 +3,9 @@
 The in-sample R² of a model with a dozen free parameters flatters it. Here the cutting
 window is split into ``BLOCKS`` contiguous blocks; each block is predicted by the same
 model (mechanisms, tares, drift) refitted on everything else — the other blocks and the
-load-free instants — with the alignment (clock shift, a load model's stop) held at the full
-fit's values, as it is pinned by a few instants a block may contain. The held-out R² is
+load-free instants — with the alignment (clock shift, a load model's stop) and clogging's
+retained fraction held at the full fit's values, as each is pinned by a few instants a block
+may contain. The held-out R² is
 1 − Σ(y − ŷ_held)² / Σ(y − ȳ)² over the window, on the smoothed recording, per channel.
 A mechanism that only bends the curve to the data it saw predicts the blocks it did not
 worse than the simulation alone.
@@ -45,7 +46,7 @@ def held_out_predictions(problem: Problem, fit: Fit, window: np.ndarray) -> np.n
     >>> pred = held_out_predictions(problem, fit, window)  # doctest: +SKIP
     """
     names = problem.nonlinear_names(fit.subset, fit.variant)
-    alignment = {n: fit.params[n] for n in problem.nonlinear_names(frozenset())}
+    alignment = {n: fit.params[n] for n in problem.held_out_fixed_names(fit.subset)}
     start = {n: fit.params[n] for n in names}
     out = fit.model.copy()
     for block in block_masks(window):

@@ -198,6 +198,14 @@ class Problem:
                         if mech in subset and (n not in PULSATION_VARIANTS or n in variant)
                         and (n != "clogging_retained" or self.breaks_through)]
 
+    def held_out_fixed_names(self, subset: frozenset) -> list[str]:
+        """Nonlinear parameters a held-out refit keeps at the full fit's values: the alignment
+        (pinned by a few instants, the ramp or the stop, that a block may hold) and clogging's
+        retained fraction ρ (pinned only by the instants after breakthrough: without them it
+        is free and its extrapolation meaningless)."""
+        retained = ["clogging_retained"] if "clogging_retained" in self.nonlinear_names(subset) else []
+        return self.nonlinear_names(frozenset()) + retained
+
     def linear_names(self, subset: frozenset) -> list[list[str]]:
         """Names of the linear parameters of each channel, in the order of :meth:`design`'s columns
         (the clogging torque gain, when present, last)."""

@@ -112,11 +112,12 @@ def folds(problem: Problem) -> list[np.ndarray]:
 
 def held_out_chi2(problem: Problem, fit: Fit, inflation: np.ndarray) -> float:
     """Σ over folds of the χ² of held-out segments, each predicted by a fit on the others. The
-    alignment (shift, stop depth) stays at the full fit's values: it is pinned by a few instants
-    (the ramp, the stop) that a fold may hold out, and it is not what is being tested."""
+    alignment (shift, stop depth) and clogging's retained fraction stay at the full fit's values
+    (:meth:`~.mechanisms.Problem.held_out_fixed_names`): each is pinned by a few instants that a
+    fold may hold out, and they are not what is being tested."""
     names = problem.nonlinear_names(fit.subset, fit.variant)
     start = {n: fit.params[n] for n in names}
-    alignment = {n: fit.params[n] for n in problem.nonlinear_names(frozenset())}
+    alignment = {n: fit.params[n] for n in problem.held_out_fixed_names(fit.subset)}
     total = 0.0
     for held in folds(problem):
         f = fit_subset(problem, fit.subset, [start], rows=~held, variant=fit.variant, fixed=alignment)
