@@ -23,8 +23,12 @@ Events of a trace (:func:`trace_events`), on its lightly smoothed thrust F and s
 Clock (:func:`clock_offset_s`): the Pearson correlation of the rates of change of the
 recording and of the trace (both channels when both have torque), smoothed by a Gaussian of
 ``CLOCK_SMOOTHING_S`` and sampled every ``CLOCK_STEP_S``, over every lag that keeps the trace's
-contact inside the recording. The rates peak at the edges — contact, breakthrough, stop — so
-tare, scale, a drift or a clogging trend change the correlation's value, not where it peaks.
+contact ``CONTACT_MARGIN_S`` inside the recording. The rates peak at the edges — contact,
+breakthrough, stop — so tare, scale, a drift or a clogging trend change the correlation's value,
+not where it peaks. A recording whose own clock runs a few percent fast or slow correlates
+poorly everywhere, and its best lag can be spurious: the trace's own clock (lag 0, when it puts
+the contact inside the recording) is kept unless another lag correlates better by
+``CLOCK_PREFERENCE``.
 """
 
 from __future__ import annotations
@@ -45,6 +49,11 @@ MIN_FALL = 0.12
 CLOCK_STEP_S = 0.01
 #: Smoothing of the signals whose rates are correlated [s].
 CLOCK_SMOOTHING_S = 0.1
+#: A placement keeps the trace's contact this far inside the recording [s] (after its start;
+#: a full second before its end).
+CONTACT_MARGIN_S = 0.3
+#: The trace's own clock (lag 0) is kept unless another lag correlates better by this much.
+CLOCK_PREFERENCE = 0.1
 
 
 @dataclass(frozen=True)
@@ -134,8 +143,12 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
 
     recorded = [rate(np.interp(grid, rec_t, _smoothed(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
     lo_span, hi_span = sim.span()
-    lags = np.arange(grid[0] - sim.contact_s, grid[-1] - sim.contact_s, CLOCK_STEP_S)
-    best = (-np.inf, 0.0)
+    first, last = grid[0] + CONTACT_MARGIN_S - sim.contact_s, grid[-1] - 1.0 - sim.contact_s
+    lags = np.arange(first, last, CLOCK_STEP_S)
+    own = first <= 0.0 <= last
+    if own:
+        lags = np.concatenate([[0.0], lags])
+    best, at_zero = (-np.inf, 0.0), -np.inf
     for lag in lags:
         tau = grid - lag
         use = (tau >= lo_span) & (tau <= hi_span)
@@ -151,6 +164,10 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
             norm = math.sqrt(float(a @ a) * float(b @ b))
             score.append(float(a @ b) / norm if norm > 0 else 0.0)
         value = float(np.mean(score))
+        if lag == 0.0:
+            at_zero = value
         if value > best[0]:
             best = (value, float(lag))
+    if own and at_zero >= best[0] - CLOCK_PREFERENCE:
+        return 0.0, at_zero
     return best[1], best[0]
