@@ -277,6 +277,11 @@ def parse_case(text: str, source: Path | None = None) -> Case:
     Returns
     -------
     Case
+
+    Examples
+    --------
+    >>> parse_case('name = "mid"\\n[site]\\nposition = 0.5').site.position
+    0.5
     """
     def defaults(data: dict) -> dict:
         if "name" not in data and source is not None:

@@ -155,27 +155,30 @@ def test_interrupted_run_never_leaves_a_complete_looking_folder(tmp_path, mesh_c
     assert json.loads((out / "summary.json").read_text())["mesh"]["cache_hit"] is True
 
 
-def test_combined_study_table_sits_beside_the_thesis(p2_run, tmp_path):
+def test_combined_study_table_compares_only_the_thesis_sites(p2_run, tmp_path):
     from femstudy.study.study import write_study
     from femstudy.thesis import MAX_DEFLECTION_MM
 
     summary, _ = p2_run
+    names = ("mid-diaphysis", "femoral neck", "lateral condyle", "subtrochanteric", "supracondylar")
     sites = []
-    for name in ("mid-diaphysis", "subtrochanteric", "supracondylar"):
+    for name in names:
         s = json.loads(json.dumps(summary))
         s["site"]["name"] = name
         sites.append(s)
     text = (write_study(tmp_path, sites)).read_text()
-    rows = [line for line in text.splitlines() if line.startswith("| mid-diaphysis") or line.startswith("| sub")
-            or line.startswith("| supra")]
-    assert len(rows) == 3
-    # the thesis columns: mid-diaphysis from Table 5-14, subtrochanteric as its proximal row, supracondylar as distal
-    assert f"| {MAX_DEFLECTION_MM['mid-diaphysis'][0]:.4g} |" in rows[0]
-    assert f"| {MAX_DEFLECTION_MM['proximal'][0]:.4g} |" in rows[1]
-    assert f"| {MAX_DEFLECTION_MM['distal'][1]:.4g} |" in rows[2]
+    rows = {name: next(line for line in text.splitlines() if line.startswith(f"| {name} |")) for name in names}
+    # the thesis drilled near the neck (its "proximal" row) and near the knee ("distal")
+    assert f"| {MAX_DEFLECTION_MM['mid-diaphysis'][0]:.4g} |" in rows["mid-diaphysis"]
+    assert "| proximal |" in rows["femoral neck"] and f"| {MAX_DEFLECTION_MM['proximal'][0]:.4g} |" in rows["femoral neck"]
+    assert "| distal |" in rows["lateral condyle"] and f"| {MAX_DEFLECTION_MM['distal'][1]:.4g} |" in rows["lateral condyle"]
+    for own in ("subtrochanteric", "supracondylar"):
+        assert "none (not a thesis site)" in rows[own]
+        assert f"| {MAX_DEFLECTION_MM['proximal'][0]:.4g} |" not in rows[own]
+    assert f"| {summary['loading']['bone_set']} |" in rows["mid-diaphysis"]
     load = summary["loading"]
     assert f"{load['peak_thrust_N'] / load['static_thrust_N']:.2f}x the static Allotta thrust" in text
-    assert json.loads((tmp_path / "study.json").read_text())[1]["site"] == "subtrochanteric"
+    assert json.loads((tmp_path / "study.json").read_text())[3]["site"] == "subtrochanteric"
 
 
 def test_picture_without_fields_and_report_lists_what_exists(tmp_path, mesh_cache):

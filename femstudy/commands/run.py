@@ -16,6 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--study-out", type=Path, default=Path("results/study"),
                    help="folder of the combined table when several cases run (results/study)")
     p.add_argument("--mesh-size", type=float, metavar="MM", help="override the case's mesh size [mm]")
+    p.add_argument("--bone", metavar="NAME", help="friction calibration for every case: human, human-printed, "
+                                                 "bovine or a calibrated set (default: each case's)")
     p.add_argument("--force", action="store_true", help="run a study estimated to take very long")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
@@ -26,7 +28,8 @@ def run(args: argparse.Namespace) -> int:
 
     s = args.settings
     results, table = run_cases(args.cases, out=args.out, study_out=args.study_out, mesh_size_mm=args.mesh_size,
-                               cache_dir=s.cache_dir, solver=s.solver, bones_dir=s.bones_dir, force=args.force)
+                               cache_dir=s.cache_dir, solver=s.solver, bones_dir=s.bones_dir,
+                               bone=args.bone, force=args.force)
     for r in results:
         d, st = r.dynamic.peaks, r.static.peaks
         print(f"{r.case.name}: max deflection {d['max_deflection_mm'].value:.4g} mm dynamic / "

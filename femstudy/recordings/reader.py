@@ -255,8 +255,12 @@ def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = 
         A name from :data:`WRITE_FORMATS`, or a :class:`TextStyle`; by default from the
         suffix (.tsv, .txt DynoWare-like, .tdms, .mat, .xlsx; anything else CSV).
 
-    Example
+    Returns
     -------
+    None
+
+    Examples
+    --------
     >>> write_recording("run.xlsx", rec, "N*m", time_unit="ms")  # doctest: +SKIP
     """
     suffix_formats = {".tsv": "tsv", ".txt": "dynoware", ".tdms": "tdms", ".mat": "mat", ".xlsx": "xlsx"}

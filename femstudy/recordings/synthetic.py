@@ -170,8 +170,43 @@ def synthesize(feed_mm_s: float = 1.5, spindle_rpm: float = 1500.0, *, cortex_mm
                stop_depth_mm: float | None = None, tail_s: float = 2.0, effects: Effects = Effects(),
                seed: int = 0, specimen: str = "synthetic", depth_column: bool = False,
                metadata: dict | None = None) -> Recording:
-    """One synthetic recording (see the module docstring); friction from ``bone`` at (f, N)
-    unless ``mu_f``/``mu_w`` are given, specific cutting energies likewise."""
+    """One synthetic recording (see the module docstring).
+
+    Parameters
+    ----------
+    feed_mm_s, spindle_rpm : float
+        Feed f [mm/s] and spindle speed N [rpm].
+    cortex_mm : float
+        Cortical thickness drilled through [mm].
+    bone : str or BoneSet
+        Friction (Eqs 4.5-4.7 at f, N) and specific cutting energies, unless ``mu_f``, ``mu_w``,
+        ``u1_MPa``, ``u2_MPa`` are given.
+    model : {"clogging", "allotta"}
+        Cutting with chip evacuation (Eqs 3.16/3.19), or Allotta's cutting alone (Eqs 2.18-2.19).
+    drill_diameter_mm, point_angle_deg : float
+    sample_rate_hz, approach_s, overtravel_mm, stop_depth_mm, tail_s : float
+        Sampling [Hz] and the timeline: approach before contact [s], travel past breakthrough
+        [mm], depth where the feed stops [mm] (less than the cortex: a retraction), tail [s].
+    effects : Effects
+        Rig imperfections (noise, ripple, pulsation, drift, softening).
+    seed : int
+    specimen : str
+    depth_column : bool
+        Also record the tip depth [mm].
+    metadata : dict, optional
+        Extra header values.
+
+    Returns
+    -------
+    Recording
+        In s, N, N·mm; the ground truth (true_mu_f, true_mu_w, ...) in ``metadata``.
+
+    Examples
+    --------
+    >>> rec = synthesize(2.0, 1500, effects=Effects.none())
+    >>> round(rec.metadata["true_mu_f"], 3) > 0
+    True
+    """
     require(model in SYNTH_MODELS, f"synthetic model must be one of {', '.join(SYNTH_MODELS)}, got '{model}'")
     require(100 <= sample_rate_hz <= 10_000, f"sample rate must lie in 100 Hz-10 kHz, got {sample_rate_hz}")
     require(approach_s > 0 and tail_s > 0, "approach_s and tail_s must be positive")

@@ -119,5 +119,6 @@ def check(case, surface: Path, available_bytes: float, mesh_size_mm: float | Non
     if e.factor_s > LONG_S and not force:
         raise UserError(f"mesh.size_mm = {size:g} mm makes about {e.dofs:.2g} DOFs, estimated to take "
                         f"{e.factor_s / 3600:.2g} h to factorise; pass --force (force=True) to run it anyway")
-    log.info("estimate: about %.3g tets, %.3g DOFs, %.2g GB", e.tets, e.dofs, e.memory_bytes / 1e9)
+    log.info("estimate: at least %.3g tets, %.3g DOFs, %.2g GB (a lower bound: coarse meshes resolve the surface "
+             "with more tets)", e.tets, e.dofs, e.memory_bytes / 1e9)
     return e

@@ -40,6 +40,11 @@ def mesh_case(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     -------
     FemurModel
         ``model.stats["written"]`` lists the files written.
+
+    Examples
+    --------
+    >>> model = mesh_case(load_case("cases/middiaphysis.toml"), mesh_size_mm=16)   # doctest: +SKIP
+    >>> model.mesh.tets.shape                                                      # doctest: +SKIP
     """
     from femstudy import atomic
     from femstudy.errors import require

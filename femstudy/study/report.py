@@ -6,9 +6,13 @@ from __future__ import annotations
 from femstudy.thesis import MAX_DEFLECTION_MM, MAX_VON_MISES_MPA
 
 #: Site names that correspond to the thesis's three rows (§3.3.3: mid-diaphysis, proximal end, distal end).
+#: Site name → the thesis row (Tables 5-14/5-15) it compares with. The thesis drilled the
+#: proximal femur near the femoral neck and the distal femur near the knee (§3.3.3), so only
+#: those sites compare with its proximal and distal rows; subtrochanteric and supracondylar
+#: sites are femstudy's own and compare with no row.
 THESIS_SITE = {"mid-diaphysis": "mid-diaphysis", "middiaphysis": "mid-diaphysis",
-               "proximal": "proximal", "subtrochanteric": "proximal",
-               "distal": "distal", "supracondylar": "distal"}
+               "femoral neck": "proximal", "neck": "proximal", "proximal": "proximal",
+               "lateral condyle": "distal", "knee": "distal", "distal": "distal"}
 
 
 def _fmt(value, digits: int = 4) -> str:
@@ -96,17 +100,19 @@ def dynamics_paragraph(dyn: dict, step_s: float) -> str:
 
 
 def study_table(summaries: list[dict]) -> str:
-    """The three-site table beside the thesis's Tables 5-14 and 5-15, as Markdown."""
-    lines = ["| site | max deflection dynamic [mm] | static [mm] | ratio | thesis dyn. | thesis stat. | "
-             "max von Mises dynamic [MPa] | static [MPa] | ratio | thesis dyn. | thesis stat. | "
+    """All sites beside the thesis's Tables 5-14 and 5-15, as Markdown: the bone set whose
+    friction drove the clogging load, and which thesis row (if any) a row compares with."""
+    lines = ["| site | friction | thesis row | max deflection dynamic [mm] | static [mm] | ratio | thesis dyn. | "
+             "thesis stat. | max von Mises dynamic [MPa] | static [MPa] | ratio | thesis dyn. | thesis stat. | "
              "von Mises outside exclusion, dynamic [MPa] |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in summaries:
         res = s["results"]
         d, v, ve = res["max_deflection_mm"], res["max_von_mises_MPa"], res["max_von_mises_excl_MPa"]
-        thesis = thesis_values(s["site"]["name"])
-        td, tv = thesis if thesis else ((None, None), (None, None))
-        lines.append(f"| {s['site']['name']} | {_fmt(d['dynamic']['value'])} | {_fmt(d['static']['value'])} | "
+        row = THESIS_SITE.get(s["site"]["name"].lower())
+        td, tv = thesis_values(s["site"]["name"]) or ((None, None), (None, None))
+        lines.append(f"| {s['site']['name']} | {s['loading']['bone_set']} | {row or 'none (not a thesis site)'} | "
+                     f"{_fmt(d['dynamic']['value'])} | {_fmt(d['static']['value'])} | "
                      f"{_fmt(d['ratio_dynamic_to_static'], 3)} | {_fmt(td[0])} | {_fmt(td[1])} | "
                      f"{_fmt(v['dynamic']['value'])} | {_fmt(v['static']['value'])} | "
                      f"{_fmt(v['ratio_dynamic_to_static'], 3)} | {_fmt(tv[0])} | {_fmt(tv[1])} | "

@@ -40,6 +40,9 @@ log = logging.getLogger(__name__)
 
 #: The resolved run's basis is enriched to this error indicator (accepted below 1e-4; docs/solver.md).
 RESOLVED_RTOL = 1e-5
+#: Field frames a run writes at most (a frame is a full displacement field: 30,000 steps of
+#: a resolved run would otherwise fill memory and disk).
+MAX_FIELD_FRAMES = 100
 
 PACKAGES = ("numpy", "scipy", "scikit-fem", "pytetwild", "pyvista", "meshio", "pypardiso")
 
@@ -277,8 +280,13 @@ def _constant(static: LoadingResult, times, loading: CaseLoading) -> LoadingResu
 
 
 def _kept_steps(case: Case, n_steps: int, peak_step: int) -> set:
-    """Steps whose full field is written (every fields_every-th and the last) and pictured."""
-    keep = set(range(0, n_steps, case.output.fields_every)) | {n_steps - 1} if case.output.fields else set()
+    """Steps whose full field is written (every fields_every-th and the last, at most about
+    :data:`MAX_FIELD_FRAMES` of them) and pictured."""
+    stride = max(case.output.fields_every, -(-n_steps // MAX_FIELD_FRAMES))
+    if case.output.fields and stride > case.output.fields_every:
+        log.info("writing the field every %d steps (not every %d): at most %d frames of %d steps",
+                 stride, case.output.fields_every, MAX_FIELD_FRAMES, n_steps)
+    keep = set(range(0, n_steps, stride)) | {n_steps - 1} if case.output.fields else set()
     if case.output.screenshot:
         keep.add(peak_step)
     return keep

@@ -22,7 +22,7 @@ def write_study(folder: Path, summaries: list[dict]) -> Path:
 
 def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path = Path("results/study"), *,
               mesh_size_mm: float | None = None, cache_dir: Path = DEFAULT_CACHE_DIR, solver: str = "auto",
-              bones_dir: Path | None = None, force: bool = False) -> tuple[list, Path | None]:
+              bones_dir: Path | None = None, bone: str | None = None, force: bool = False) -> tuple[list, Path | None]:
     """Run the study of every case file into results/<case name> (or ``out`` for one case);
     with several cases also the combined table in ``study_out``.
 
@@ -37,12 +37,19 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
         Folder of the combined table (several cases).
     mesh_size_mm, cache_dir, solver, bones_dir, force
         As for :func:`femstudy.run_study`.
+    bone : str, optional
+        Replaces every case's ``drilling.bone`` (e.g. "bovine" to repeat a human-femur study
+        with the bovine friction calibration).
 
     Returns
     -------
     (list of StudyResult, Path of study.md or None)
+
+    Examples
+    --------
+    >>> results, table = run_cases([Path("cases/middiaphysis.toml"), Path("cases/proximal.toml")])  # doctest: +SKIP
     """
-    from femstudy.casefile import load_case
+    from femstudy.casefile import check_references, load_case, with_overrides
     from femstudy.errors import require
     from femstudy.study.run import run_study
     from femstudy.writable import require_writable_parent
@@ -50,6 +57,9 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
     require(out is None or len(case_files) == 1, "--out names one results folder: give one case file")
     require(mesh_size_mm is None or mesh_size_mm > 0, f"--mesh-size must be positive, got {mesh_size_mm}")
     cases = [load_case(path, bones_dir) for path in case_files]
+    if bone is not None:
+        cases = [with_overrides(case, {"drilling.bone": bone}) for case in cases]
+        check_references(cases[0], bones_dir)
     targets = [out or Path("results") / case.name for case in cases]
     for target in targets:
         require_writable_parent(target)
