@@ -101,7 +101,7 @@ def test_without_torque_clogging_is_found_on_thrust_and_mu_w_comes_from_the_bone
 def test_json_contract_names_and_types():
     _, d = diagnosed("clogging_under_pulsation", 7)
     js = d.to_json()
-    assert {"mismatch", "missing_physics", "fit"} <= set(js)
+    assert {"mismatch", "missing_physics", "unexplained", "fit"} <= set(js)
     for m in js["mismatch"]:
         assert set(m) >= {"start_s", "end_s", "channel", "significance"}
         assert m["channel"] in ("thrust_N", "torque_Nmm") and m["start_s"] < m["end_s"]
@@ -110,5 +110,9 @@ def test_json_contract_names_and_types():
         assert m["mechanism"] in ("chip_clogging", "feed_pulsation", "sensor_drift", "thermal_softening")
         assert 0 <= m["confidence"] <= 1 and isinstance(m["parameters"], dict) and m["explanation"]
     for k in ("baseline", "improved"):
-        assert set(js["fit"][k]) == {"r2", "rmse"}
+        assert set(js["fit"][k]) == {"r2", "r2_heldout", "rmse"}
     assert js["fit"]["improved"]["r2"] > js["fit"]["baseline"]["r2"]
+    # held out, the named mechanisms still predict the cut better than the simulation alone
+    assert js["fit"]["improved"]["r2_heldout"] > js["fit"]["baseline"]["r2_heldout"]
+    for u in js["unexplained"]:
+        assert set(u) >= {"start_s", "end_s", "channel", "description"} and u["start_s"] <= u["end_s"]

@@ -30,7 +30,7 @@ def test_noise_level_ignores_spindle_ripple_and_the_cut():
 
 
 def test_smoothing_is_the_same_on_recording_samples_and_on_the_model_grid():
-    """The same continuous kernel on a 1 kHz recording and a ~115 Hz model grid: a clean
+    """The same continuous kernel on a 1 kHz recording and a ~85 Hz model grid: a clean
     recording and its own model, smoothed each way, agree to under 0.2 noise units, and the
     spindle ripple is gone."""
     for rate in (1000.0, 200.0):

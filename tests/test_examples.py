@@ -54,3 +54,25 @@ def test_calibrate_then_run_example(tmp_path, mesh_cache):
     assert result.to_json()["loading"]["bone_set"] == "examplebone"
     mu_f = calibration.bone.friction(2.0, 1500.0)[0]
     assert result.to_json()["loading"]["mu_f"] == pytest.approx(mu_f, rel=1e-12)
+
+
+def test_diagnose_recording_example(tmp_path, capsys):
+    """A recording with clogging, feed pulsation and drift against a clean Allotta trace: the
+    example names all three and writes the JSON contract."""
+    import dataclasses
+    import json
+
+    import femstudy
+    from femstudy.recordings import Effects, synthesize, write_recording
+
+    write_recording(tmp_path / "rec.csv", synthesize(1.5, 1500, seed=3))
+    write_recording(tmp_path / "sim.csv", synthesize(1.5, 1500, model="allotta", effects=Effects.none(),
+                                                     sample_rate_hz=250))
+    d = load("diagnose_recording").main(tmp_path / "rec.csv", tmp_path / "sim.csv", tmp_path / "d.json")
+    assert isinstance(d, femstudy.Diagnosis)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        d.seconds = 0.0
+    assert {m["mechanism"] for m in d.mechanisms} == {"chip_clogging", "feed_pulsation", "sensor_drift"}
+    js = json.loads((tmp_path / "d.json").read_text())
+    assert js["fit"]["improved"]["r2_heldout"] > js["fit"]["baseline"]["r2_heldout"]
+    assert "held out" in capsys.readouterr().out

@@ -14,21 +14,23 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Compare a force/torque recording with a simulation: locate where they "
                                    "differ beyond the measurement noise, find which missing mechanisms "
                                    "(chip clogging, feed pulsation, sensor drift, thermal softening) explain "
-                                   "it, fit them and show the fit improve. Reports nothing when nothing is "
-                                   "missing. Exit status 0 whatever is found.")
+                                   "it, fit them and show the fit improve, and describe what none of them "
+                                   "explains. Reports nothing when nothing is missing. Exit status 0 whatever "
+                                   "is found.")
     p.add_argument("recording", type=Path, metavar="RECORDING",
                    help="the recording: CSV/TSV/text export, .tdms, .mat or .xlsx (docs/recordings.md)")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--simulation", type=Path, metavar="SIM.csv",
-                      help="a simulated trace in the recording format, on the recording's clock "
-                           "(any sampling rate and span)")
+                      help="a simulated trace in the recording format (any sampling rate, span and "
+                           "clock: it is placed on the recording's by correlation)")
     what.add_argument("--model", choices=("allotta", "clogging"),
                       help="a femstudy load model for the recording's feed, speed and drill, started "
                            "at its detected contact")
     p.add_argument("--bone", default="bovine",
                    help="bone set for --model and for the friction reading of chip clogging (bovine)")
     p.add_argument("--cortex-mm", type=float,
-                   help="cortical thickness [mm] (default: header cortex_mm, else from the breakthrough)")
+                   help="cortical thickness [mm] (default: header cortex_mm, else the simulation's "
+                        "breakthrough, else the depth reached, with a note)")
     add_metadata_options(p, "the recording")
     p.add_argument("--json", type=Path, metavar="OUT.json", help="write the diagnosis as JSON")
     p.add_argument("--report", type=Path, metavar="DIR",
@@ -39,40 +41,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import logging
-    from femstudy.diagnosis import inputs, report
-    from femstudy.diagnosis.diagnose import diagnose
-    from femstudy.drilling.friction import load_bone_set
-    from femstudy.recordings import read_recording
+    from femstudy.diagnosis import diagnose
 
-    log = logging.getLogger("femstudy.diagnosis")
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
     require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
-    rec = read_recording(args.recording, parse_settings(args.set), override_header=args.override,
-                         columns=args.columns)
-    for note in rec.notes:
-        log.info(note)
-    bone = load_bone_set(args.bone, args.settings.bones_dir)
-    if args.simulation:
-        sim = inputs.read_simulation(args.simulation, rec)
-        cortex = inputs.cortex_thickness(rec, args.cortex_mm)
-        label = f"{args.simulation.name}"
-    else:
-        sim, cortex = inputs.model_simulation(rec, args.model, bone, args.cortex_mm)
-        label = f"load model '{args.model}' (bone set '{bone.name}'), contact at {sim.contact_s:.3f} s"
-    log.info(f"read {rec.name} ({rec.time_s.size} samples) and the simulation ({label})")
-    d = diagnose(rec, sim, cortex, bone, progress=log.info)
-    summary = report.summary_text(d, label)
-    print(summary)
-    if args.json:
-        report.write_json(args.json, d)
-        print(f"wrote {args.json}")
-    if args.plot:
-        report.plot(args.plot, d)
-        print(f"wrote {args.plot}")
-    if args.report:
-        report.write_report(args.report, d, summary)
-        print(f"wrote {args.report}/report.md")
-    log.info(f"diagnosed in {d.seconds:.2f} s")
+    d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
+                 columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
+                 bone_library=args.settings.bones_dir)
+    print(d.summary())
+    for path in d.write(args.json, args.plot, args.report):
+        print(f"wrote {path}")
     return 0

@@ -33,11 +33,13 @@ from scipy import signal, sparse
 MIN_SIGMA_S = 0.035
 #: Decimation step in Gaussian widths; neighbours then correlate by exp(−3.5²/4) = 0.047.
 STEP_SIGMAS = 3.5
+#: Fewest analysis instants of a window.
+MIN_INSTANTS = 40
 #: Kernel support in Gaussian widths (weights beyond are below 4e-6 of the peak).
 SUPPORT_SIGMAS = 5.0
-#: Model grid spacing in Gaussian widths (about 115 Hz at the smallest width; the smoothed
-#: model then differs from the same model sampled at 1 kHz by under 0.2 noise units).
-MODEL_STEP_SIGMAS = 1 / 4
+#: Model grid spacing in Gaussian widths (about 85 Hz at the smallest width; the smoothed
+#: model then differs from the same model sampled at 1 kHz by under 0.15 noise units).
+MODEL_STEP_SIGMAS = 1 / 3
 #: Lowest frequency of the band where the noise level is read [Hz].
 NOISE_BAND_LOW_HZ = 10.0
 
@@ -95,9 +97,11 @@ class Band:
 
 
 def make_band(t: np.ndarray, spindle_rpm: float, start_s: float, end_s: float) -> Band:
-    """The band for recording times ``t`` restricted to [start_s, end_s]."""
+    """The band for recording times ``t`` restricted to [start_s, end_s]. A short window gets
+    closer instants (at least ``MIN_INSTANTS``); their stronger correlation is the noise
+    model's business (:mod:`.noise`)."""
     sigma = kernel_width_s(spindle_rpm)
-    step = STEP_SIGMAS * sigma
+    step = min(STEP_SIGMAS * sigma, (end_s - start_s) / MIN_INSTANTS)
     n = int(math.floor((end_s - start_s) / step))
     t_dec = start_s + (end_s - start_s - n * step) / 2 + step * np.arange(n + 1)
     h = MODEL_STEP_SIGMAS * sigma
@@ -111,7 +115,7 @@ def make_band(t: np.ndarray, spindle_rpm: float, start_s: float, end_s: float) -
                                    shape=(t_dec.size, t.size))
     gain = np.sqrt(np.asarray(on_samples.multiply(on_samples).sum(axis=1)).ravel())
     return Band(sigma, t_dec, t_model, on_samples, gaussian_operator(t_model, t_dec, sigma), gain,
-                float(math.exp(-STEP_SIGMAS ** 2 / 4)))
+                float(math.exp(-(step / sigma) ** 2 / 4)))
 
 
 def white_noise_sigma(t: np.ndarray, residual: np.ndarray) -> float:

@@ -12,7 +12,8 @@ feed stops at ``stop_s``; then the loads vanish. The diagnosis maps the recordin
   restricted to the span it covers. Its contact is where its first loaded samples extrapolate
   to zero (the entry ramp is linear in depth), its stop the deepest point of its ``depth_mm``
   column, or else one spindle revolution before its loads vanish for good (the generator's
-  and the rig's convention: loads fall to zero within one revolution once the feed stops).
+  and the rig's convention: loads fall to zero within one revolution once the feed stops),
+  the vanishing point extrapolated from the last sample above 1 % of the peak.
 - :class:`ModelSimulation`: a load model of :mod:`femstudy.drilling.history` for the
   recording's feed, speed, drill and cortex, started at the recording's contact and stopped at
   a depth that the fit adjusts (the stop of a real rig is not at a known depth).
@@ -61,6 +62,7 @@ class TraceSimulation:
     depth_mm: np.ndarray | None = None
     label: str = "simulation"
     note: str = ""               # how the trace was placed on the recording's clock, if it was
+    events: object = None        # timing.TraceEvents once known (contact, breakthrough, cortex)
 
     def __post_init__(self) -> None:
         t, F = self.time_s, np.abs(self.thrust_N)
@@ -73,7 +75,15 @@ class TraceSimulation:
         if self.depth_mm is not None and np.ptp(self.depth_mm) > 0:
             self.stop_s = float(t[int(np.argmax(self.depth_mm))])
         elif self.zero_after:
-            self.stop_s = _zero_crossing(t, F, loaded[-1], +1) - 60.0 / self.spindle_rpm
+            # where the final fall reaches zero, extrapolated from its last sample above 1 % of
+            # the peak (a lagged fall has a long tail below that), one revolution after the stop
+            k = int(np.flatnonzero(F > UNLOADED * peak)[-1])
+            last = int(loaded[-1]) + 1 if loaded[-1] + 1 < t.size else int(loaded[-1])
+            if k > 0 and F[k - 1] != F[k]:
+                vanish = float(np.clip(t[k] - F[k] * (t[k - 1] - t[k]) / (F[k - 1] - F[k]), t[k], t[last]))
+            else:
+                vanish = float(t[last])
+            self.stop_s = vanish - 60.0 / self.spindle_rpm
         else:
             self.stop_s = math.inf
         self.stop_s = max(self.stop_s, self.contact_s)

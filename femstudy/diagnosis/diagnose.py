@@ -1,12 +1,16 @@
 """Diagnose one recording against one simulation: locate, explain, model, show the improvement.
 
-Steps (each in its module): the analysis band and the noise level (:mod:`.band`); the
-alignment of the simulation (shift, tare, and the stop depth of a load model); the mismatch
-intervals of the aligned simulation (:mod:`.locate`); fits of every subset of the four
-mechanisms (:mod:`.fit`); selection (:mod:`.select`); the physical reading of the selected
-parameters (:mod:`.explain`).
+Steps (each in its module): the inputs, with timing and geometry from the simulation
+(:mod:`.inputs`, :mod:`.timing`); the analysis band, the alignment and the fitted noise model
+(:mod:`.prepare`, :mod:`.noise`); the mismatch intervals of the aligned simulation
+(:mod:`.locate`); fits of every subset of the four mechanisms (:mod:`.fit`); selection
+(:mod:`.select`); what the best model leaves unexplained and the confidences
+(:mod:`.openworld`, :mod:`.verdict`); held-out R² (:mod:`.heldout`); the physical reading
+of the named parameters (:mod:`.explain`).
 
-Calibration: when the selected model still leaves more than noise (χ² test p ≤ RESIDUAL_P),
+Calibration: when the selected model still leaves more than noise (χ² test p ≤ RESIDUAL_P)
+and a scale on the modelled loads would explain part of what it, or the simulation alone,
+leaves (:func:`scale_helps`; a mechanism fitted first can absorb most of a scale error),
 everything is refitted with a scale on each channel's simulated cutting load (a simulation
 whose cutting energy is off by a few percent is otherwise "explained" by softening or
 clogging). The rescaled family is kept when its selected model has a BIC lower by
@@ -17,174 +21,150 @@ linear in time over a cut, and the scale removes the anchor the initial force pr
 
 from __future__ import annotations
 
+import logging
 import math
+import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
-from scipy import optimize
 
-from femstudy.diagnosis import explain
-from femstudy.diagnosis.band import make_band, white_noise_sigma
+from femstudy.diagnosis import explain, heldout, inputs, openworld
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
-from femstudy.diagnosis.fit import Fit, fit_all, fit_subset, seeds
+from femstudy.diagnosis.fit import Fit, fit_all, seeds
 from femstudy.diagnosis.locate import mismatch_intervals
-from femstudy.diagnosis.mechanisms import Geometry, Problem
+from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.prepare import align, build_problem, cut_window, restate, with_noise
 from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection, select
+from femstudy.diagnosis.verdict import Verdict, decide
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
-from femstudy.recordings.reader import Recording
+from femstudy.recordings.reader import Recording, read_recording
 
-#: Shifts tried before the alignment is refined [s].
-SHIFT_GRID_S = np.arange(-0.3, 0.3001, 0.01)
-#: A load model's stop is refined within ± this time [s] of the detected one.
-STOP_SCAN_S = 0.3
-#: Huber threshold of the robust alignment, in noise units.
-HUBER_Z = 3.0
-#: Fewest unloaded instants from which a tare is taken.
-MIN_UNLOADED = 5
-#: Smallest noise level, as a fraction of a channel's recorded range: a sensor resolves no
-#: better, and below it the model's own quadrature error (about 1e-4 of the load) would count.
-NOISE_FLOOR = 1e-3
+logger = logging.getLogger(__name__)
 
 
-@dataclass
+@dataclass(frozen=True)
 class Diagnosis:
-    """Everything the command reports."""
+    """The result of :func:`diagnose`: everything ``femstudy diagnose`` reports.
+
+    :meth:`to_json` is the JSON contract (docs/diagnosis.md), :meth:`summary` the printed
+    text and :meth:`write` the files. Times are on the recording's clock [s], loads in N and N·mm.
+
+    Attributes
+    ----------
+    recording : the recording diagnosed (:class:`~femstudy.recordings.Recording`).
+    problem : the fitted problem: analysis band, channels, noise model, aligned simulation.
+    baseline : the simulation as given, aligned (clock shift, tares): the "before" fit.
+    fits : every fitted subset of the catalogue, by frozenset of mechanism names.
+    selection : the model selection (BIC table, inclusion probabilities, what was dropped).
+    verdict : the named subset, its fit, the shapes left unexplained, the confidences.
+    mismatch : intervals where the aligned simulation departs from the recording beyond noise
+        (dicts: start_s, end_s, channel, significance, max_abs_z).
+    mechanisms : the named mechanisms (dicts: mechanism, confidence, parameters,
+        explanation, evidence).
+    unexplained : what the best catalogue model leaves, characterised (dicts: start_s, end_s,
+        channel, kind, description, evidence).
+    fit_summary : per channel, R² (in sample and held out) and RMSE before and after.
+    noise_models : per channel, the fitted :class:`~femstudy.diagnosis.noise.NoiseSpectrum`.
+    timing : the simulation's events on the recording's clock, and the cortex [mm].
+    simulation_label : what the recording was compared with.
+    seconds : wall-clock time of the diagnosis [s].
+    notes : how inputs were read or estimated (one sentence each).
+    """
 
     recording: Recording
     problem: Problem
     baseline: Fit
     fits: dict
     selection: Selection
+    verdict: Verdict
     mismatch: list
-    mechanisms: list             # dicts: mechanism, confidence, parameters, explanation
-    fit_summary: dict            # per channel: baseline/improved r2, rmse
+    mechanisms: list
+    unexplained: list
+    fit_summary: dict
+    noise_models: dict
+    timing: dict
+    simulation_label: str
     seconds: float
-    notes: list = field(default_factory=list)
+    notes: tuple = ()
+
+    def summary(self) -> str:
+        """The printed summary (inputs, noise, timing, mechanisms, unexplained, fit, residual test)."""
+        from femstudy.diagnosis import report
+
+        return report.summary_text(self)
+
+    def write(self, json_path=None, plot_path=None, report_dir=None) -> list[Path]:
+        """Write the JSON contract, the overlay/residual figure and the report folder (report.md,
+        overlay.png, residuals.png, diagnosis.json), each atomically; returns what was written.
+
+        Example
+        -------
+        >>> d.write(json_path="d.json", report_dir="report")  # doctest: +SKIP
+        [PosixPath('d.json'), PosixPath('report/report.md')]
+        """
+        from femstudy.diagnosis import report
+
+        written = []
+        if json_path is not None:
+            report.write_json(json_path, self)
+            written.append(Path(json_path))
+        if plot_path is not None:
+            report.plot(plot_path, self)
+            written.append(Path(plot_path))
+        if report_dir is not None:
+            report.write_report(report_dir, self, self.summary())
+            written.append(Path(report_dir) / "report.md")
+        return written
 
     @property
     def improved(self) -> Fit:
-        return self.fits[self.selection.subset]
+        return self.verdict.fit
+
+    @property
+    def subset(self) -> frozenset:
+        """The named mechanisms."""
+        return self.verdict.subset
 
     def to_json(self) -> dict:
-        """The issue's JSON contract, with per-channel and selection detail added."""
+        """The JSON contract, with per-channel, noise and selection detail added."""
         thrust = self.fit_summary["thrust_N"]
+        units = {"thrust_N": "N", "torque_Nmm": "N·mm"}
         return {
             "mismatch": self.mismatch,
             "missing_physics": self.mechanisms,
+            "unexplained": self.unexplained,
             "fit": {"baseline": thrust["baseline"], "improved": thrust["improved"],
                     "window_s": thrust["window_s"],
                     "channels": {c: {k: v for k, v in s.items() if k != "window_s"}
                                  for c, s in self.fit_summary.items()}},
             "alignment": explain.alignment(self.problem, self.baseline),
             "calibration": explain.calibration(self.problem, self.improved),
+            "timing": self.timing,
             "noise": {c: float(s) for c, s in zip(self.problem.channels, self.problem.sigma_raw)},
-            "residual_check": {"chi2_per_dof": round(self.selection.chi2_per_dof, 3),
-                               "p_value": self.selection.residual_p_value,
-                               "consistent_with_noise": bool(self.selection.residual_p_value > RESIDUAL_P)},
+            "noise_model": {c: m.to_json(units[c], self.problem.band.sigma_s) for c, m in self.noise_models.items()},
+            "residual_check": {"chi2_per_dof": round(self.verdict.chi2_per_dof, 3),
+                               "p_value": self.verdict.residual_p_value,
+                               "consistent_with_noise": bool(self.verdict.consistent_with_noise)},
             "selection": {"bic": {"+".join(sorted(s)) or "none": round(b, 2)
                                   for s, b in sorted(self.selection.bic.items(), key=lambda kv: kv[1])},
-                          "not_selected": self.selection.dropped,
-                          "confidence": {m: round(c, 4) for m, c in self.selection.confidence.items()}},
+                          "not_selected": {**self.selection.dropped, **self.verdict.dropped},
+                          "inclusion_probability": {m: round(c, 4) for m, c in self.selection.confidence.items()}},
             "seconds": round(self.seconds, 3),
-            "notes": self.notes,
+            "notes": list(self.notes),
         }
 
 
-def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[Problem, list]:
-    """Smooth the recording in the window the simulation covers; estimate its noise."""
-    notes = [simulation.note] if getattr(simulation, "note", "") else []
-    t = recording.time_s
-    lo, hi = simulation.span()
-    start, end = max(t[0], lo), min(t[-1], hi)
-    if start > t[0] or end < t[-1]:
-        notes.append(f"compared over {start:.3f}-{end:.3f} s, where the simulation has loads on both sides")
-    require(end - start > 1.0 and start <= simulation.contact_s <= end,
-            f"the simulation (contact at {simulation.contact_s:.3f} s) does not overlap recording {recording.name} "
-            f"({t[0]:.3f}-{t[-1]:.3f} s); it must cover the cut on the recording's clock")
-    band = make_band(t, recording.spindle_rpm, start, end)
-    require(band.t_dec.size >= 20, f"recording {recording.name} is too short to diagnose: "
-                                   f"{end - start:.2f} s gives {band.t_dec.size} smoothed samples, need 20")
-    channels = ["thrust_N"]
-    if recording.torque_Nmm is not None and simulation.has_torque:
-        channels.append("torque_Nmm")
-    elif recording.torque_Nmm is not None:
-        notes.append("the simulation has no torque: diagnosing on thrust alone")
-    inside = (t >= start) & (t <= end)
-    F_sim, T_sim = simulation.loads(t[inside])
-    raw = {"thrust_N": recording.thrust_N, "torque_Nmm": recording.torque_Nmm}
-    sims = {"thrust_N": F_sim, "torque_Nmm": T_sim}
-    sigma_raw = np.array([white_noise_sigma(t[inside], raw[c][inside] - sims[c]) for c in channels])
-    floor = NOISE_FLOOR * np.array([max(float(np.ptp(raw[c][inside])), 1e-9) for c in channels])
-    sigma_raw = np.maximum(sigma_raw, floor)
-    y = band.smooth(np.vstack([raw[c] for c in channels]))
-    sigma = sigma_raw[:, None] * band.noise_gain[None, :]
-    geometry = Geometry(recording.feed_mm_s, recording.spindle_rpm, recording.drill, cortex_mm)
-    F_o = float(simulation.loads(np.array([simulation.contact_s + geometry.cone_mm / geometry.feed_mm_s]))[0][0])
-    clogging_possible = cortex_mm > geometry.cone_mm + 0.05 * geometry.diameter_mm and F_o > 0
-    if not clogging_possible:
-        notes.append(f"the cortex ({cortex_mm:.2f} mm) is not thicker than the tip cone "
-                     f"({geometry.cone_mm:.2f} mm): chip clogging cannot be tested")
-    problem = Problem(band, tuple(channels), y, sigma, sigma_raw, simulation, geometry, F_o, clogging_possible)
-    return problem, notes
-
-
-def align(problem: Problem) -> Fit:
-    """The simulation as given, aligned robustly: each channel's tare is the median of
-    recording − simulation over the instants where the simulation is unloaded (all instants if
-    fewer than ``MIN_UNLOADED``); the shift (and a load model's stop depth) minimise the Huber
-    cost Σ ρ(z), ρ quadratic up to |z| = ``HUBER_Z`` and linear beyond, so stretches where
-    physics is missing do not drag the alignment."""
-    sim = problem.simulation
-
-    def model(params):
-        terms = problem.terms(params)
-        base = problem.band.smooth_model(np.vstack([terms[c] for c in problem.channels]))
-        unloaded = np.abs(base[0]) < 0.01 * max(float(np.max(np.abs(base[0]))), 1e-12)
-        use = unloaded if np.count_nonzero(unloaded) >= MIN_UNLOADED else np.ones_like(unloaded)
-        tare = np.median((problem.y - base)[:, use], axis=1)
-        return base + tare[:, None], tare
-
-    def cost(params):
-        z = np.abs(problem.y - model(params)[0]) / problem.sigma
-        return float(np.sum(np.where(z <= HUBER_Z, 0.5 * z * z, HUBER_Z * z - 0.5 * HUBER_Z ** 2)))
-
-    params = {"shift_s": 0.0}
-    if sim.stop_is_parameter:
-        params["stop_depth_mm"] = sim.stop_depth_mm
-        f = problem.geometry.feed_mm_s
-        depths = sim.stop_depth_mm + f * np.arange(-STOP_SCAN_S, STOP_SCAN_S + 1e-9, 0.01)
-    for _ in range(2 if sim.stop_is_parameter else 1):
-        params["shift_s"] = min(SHIFT_GRID_S, key=lambda s: cost({**params, "shift_s": s}))
-        if sim.stop_is_parameter:
-            params["stop_depth_mm"] = min(depths, key=lambda d: cost({**params, "stop_depth_mm": d}))
-    step = SHIFT_GRID_S[1] - SHIFT_GRID_S[0]
-    best = optimize.minimize_scalar(lambda s: cost({**params, "shift_s": s}), method="bounded",
-                                    bounds=(params["shift_s"] - step, params["shift_s"] + step),
-                                    options={"xatol": 1e-4})
-    params["shift_s"] = float(best.x)
-    fitted, tare = model(params)
-    params.update({f"{c}_tare": float(v) for c, v in zip(problem.channels, tare)})
-    chi2 = np.sum(((problem.y - fitted) / problem.sigma) ** 2, axis=1)
-    return Fit(frozenset(), params, chi2, fitted, len(problem.nonlinear_names(frozenset())) + len(problem.channels))
-
-
-def _cut_window(problem: Problem, fit: Fit) -> np.ndarray:
-    """Instants from contact to one revolution after the stop (the cutting phase)."""
-    sim, t = problem.simulation, problem.band.t_dec
-    shift = fit.params["shift_s"]
-    stop = (sim.contact_s + fit.params["stop_depth_mm"] / problem.geometry.feed_mm_s
-            if sim.stop_is_parameter else sim.stop_s)
-    end = stop + shift + 60.0 / problem.geometry.spindle_rpm if math.isfinite(stop) else t[-1]
-    return (t >= sim.contact_s + shift) & (t <= end)
-
-
 def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> dict:
-    """R² and RMSE of the smoothed recording over the cutting phase, per channel."""
-    window = _cut_window(problem, baseline)
+    """R² and RMSE of the smoothed recording over the cutting phase, per channel: in-sample
+    (``r2``) and held out (``r2_heldout``, blocked folds, :mod:`.heldout`)."""
+    window = cut_window(problem, baseline)
     if np.count_nonzero(window) < 3:
         window = np.ones_like(window)
+    predictions = {"baseline": heldout.held_out_predictions(problem, baseline, window),
+                   "improved": heldout.held_out_predictions(problem, improved, window)}
     out = {}
     t = problem.band.t_dec[window]
     for c, name in enumerate(problem.channels):
@@ -192,7 +172,8 @@ def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> dict:
         scores = {}
         for label, fit in (("baseline", baseline), ("improved", improved)):
             r = y - fit.model[c, window]
-            scores[label] = {"r2": round(float(1 - np.sum(r ** 2) / np.sum((y - y.mean()) ** 2)), 4),
+            scores[label] = {"r2": round(heldout.r2(y, fit.model[c, window]), 4),
+                             "r2_heldout": round(heldout.r2(y, predictions[label][c, window]), 4),
                              "rmse": round(float(np.sqrt(np.mean(r ** 2))), 4)}
         out[name] = {**scores, "window_s": [round(float(t[0]), 3), round(float(t[-1]), 3)]}
     return out
@@ -204,41 +185,159 @@ def fit_and_select(problem: Problem, start_params: dict) -> tuple[dict, Selectio
     return fits, select(problem, fits)
 
 
+#: Least scale error (fraction) for which the calibrated family is fitted.
+MIN_SCALE_ERROR = 0.01
+
+
+def scale_helps(problem: Problem, fit: Fit, inflation: np.ndarray) -> bool:
+    """Whether a scale on each channel's modelled load explains the residual of ``fit``: BIC
+    gain (GLS, misfit-inflated) of at least ``MIN_DELTA_BIC`` and a scale error of at least
+    ``MIN_SCALE_ERROR`` in some channel."""
+    _, loads = openworld.modelled_loads(problem, fit.params)
+    columns = problem.band.smooth_model(np.vstack(loads))
+    gain, big = 0.0, False
+    for c in range(len(problem.channels)):
+        x = problem.whiten(c, columns[c])
+        r = problem.whiten(c, problem.y[c] - fit.model[c])
+        norm = float(x @ x)
+        if norm <= 0:
+            continue
+        gain += float(x @ r) ** 2 / norm / inflation[c]
+        big = big or abs(float(x @ r) / norm) >= MIN_SCALE_ERROR
+    return big and gain - len(problem.channels) * math.log(problem.y.size) >= MIN_DELTA_BIC
+
+
 def plain_bic(problem: Problem, fit: Fit) -> float:
     """BIC on the data's own noise level (no misfit inflation), comparable across calibrations."""
-    n_eff = problem.y.size * problem.band.n_eff_factor
-    return fit.chi2_total * problem.band.n_eff_factor + fit.n_params * math.log(n_eff)
+    n_eff = problem.y.size * problem.n_eff_factor
+    return fit.chi2_total * problem.n_eff_factor + fit.n_params * math.log(n_eff)
 
 
-def diagnose(recording: Recording, simulation: TraceSimulation | ModelSimulation, cortex_mm: float,
-             bone: str | BoneSet = "bovine", progress=None) -> Diagnosis:
-    """Diagnose ``recording`` against ``simulation`` (see the module docstring). ``bone`` gives
-    μ_w for the friction reading of chip clogging when the torque cannot."""
+def _simulation(recording: Recording, simulation, model: str | None, cortex_mm: float | None,
+                bone_set: BoneSet):
+    """The simulation on the recording's clock, the cortex [mm], a label and notes."""
+    if simulation is None:
+        require(model is not None, "give a simulation (a trace file) or a load model to diagnose against")
+        sim, cortex, notes = inputs.model_simulation(recording, model, bone_set, cortex_mm)
+        label = f"load model '{model}' (bone set '{bone_set.name}'), contact at {sim.contact_s:.3f} s"
+        return sim, cortex, label, notes
+    if isinstance(simulation, ModelSimulation):
+        return simulation, float(cortex_mm or simulation.conditions.cortex_mm), f"load model '{simulation.model}'", []
+    if isinstance(simulation, (str, os.PathLike)):
+        sim = inputs.read_simulation(simulation, recording)
+        label = os.path.basename(os.fspath(simulation))
+    elif isinstance(simulation, Recording):
+        sim = inputs.with_events(inputs.on_recording_clock(
+            TraceSimulation.from_recording(simulation, recording.spindle_rpm), recording), recording)
+        label = simulation.name
+    else:
+        sim = simulation if simulation.events is not None else inputs.with_events(simulation, recording)
+        label = sim.label
+    cortex, notes = inputs.trace_cortex(sim, recording, cortex_mm)
+    return sim, cortex, label, notes
+
+
+def _timing(problem: Problem, baseline: Fit, cortex_mm: float) -> dict:
+    sim = problem.simulation
+    shift = baseline.params["shift_s"]
+    events = getattr(sim, "events", None)
+    if events is not None:
+        out = events.to_json(shift)
+        out["cortex_source"] = "the simulation's breakthrough" if events.cortex_mm is not None else "depth reached"
+    else:
+        out = {"contact_s": round(sim.contact_s + shift, 4), "feed_stop_s": round(sim.stop_s + shift, 4)
+               if math.isfinite(sim.stop_s) else None}
+    out["cortex_mm"] = round(cortex_mm, 3)
+    return out
+
+
+def diagnose(recording, simulation=None, cortex_mm: float | None = None,
+             bone: str | BoneSet = "bovine", progress=None, *, model: str | None = None,
+             columns=None, overrides: dict | None = None, override_header: bool = False,
+             bone_library: Path | None = None) -> Diagnosis:
+    """Diagnose ``recording`` against a simulation (see the module docstring).
+
+    Parameters
+    ----------
+    recording : a :class:`~femstudy.recordings.Recording`, or the path of a recording file
+        (any format :func:`femstudy.recordings.read_recording` reads, with ``columns``,
+        ``overrides`` and ``override_header`` passed to it).
+    simulation : a simulated trace — a path in the recording format, a
+        :class:`~femstudy.recordings.Recording`, or a :class:`.TraceSimulation` — or a
+        :class:`.ModelSimulation`; None with ``model``.
+    cortex_mm : cortical thickness [mm]; default: the recording's header ``cortex_mm``, else
+        the simulation's breakthrough, else (no breakthrough) the depth reached, with a note.
+    bone : bone set (or its name, resolved in ``bone_library``) giving μ_w for the friction
+        reading of chip clogging without torque, and the friction of a load model.
+    progress : optional callable taking one message per step (they also go to the logger).
+    model : "allotta" or "clogging": diagnose against that femstudy load model instead, started
+        at the recording's detected contact.
+
+    Returns
+    -------
+    Diagnosis
+
+    Example
+    -------
+    >>> d = diagnose("rec.csv", "sim.csv")                           # doctest: +SKIP
+    >>> d.to_json()["missing_physics"], d.to_json()["unexplained"]   # doctest: +SKIP
+    """
     start = time.perf_counter()
-    say = progress or (lambda message: None)
-    problem, notes = build_problem(recording, simulation, cortex_mm)
-    say(f"{problem.band.t_dec.size} smoothed samples per channel ({', '.join(problem.channels)}), "
-        f"noise {', '.join(f'{s:.3g}' for s in problem.sigma_raw)}")
+
+    def say(message: str) -> None:
+        logger.info(message)
+        if progress:
+            progress(message)
+
+    if isinstance(recording, (str, os.PathLike)):
+        recording = read_recording(recording, overrides, override_header=override_header, columns=columns)
+        for note in recording.notes:
+            say(note)
+    bone_set = load_bone_set(bone, bone_library) if isinstance(bone, str) else bone
+    sim, cortex, label, notes = _simulation(recording, simulation, model, cortex_mm, bone_set)
+    say(f"read {recording.name} ({recording.time_s.size} samples) and the simulation ({label})")
+    problem, more = build_problem(recording, sim, cortex)
+    notes = notes + more
     baseline = align(problem)
-    z = (problem.y - baseline.model) / problem.sigma
+    problem, noise_models, noise_notes = with_noise(problem, baseline, recording)
+    notes += noise_notes
+    baseline = restate(problem, baseline)
+    say(f"{problem.band.t_dec.size} smoothed samples per channel ({', '.join(problem.channels)}); noise "
+        + ", ".join(f"{c} alpha {m.exponent:.2f}, corner {m.corner_hz:.3g} Hz" for c, m in noise_models.items()))
+    residual = problem.y - baseline.model
     mismatch = sorted((interval for c, name in enumerate(problem.channels)
-                       for interval in mismatch_intervals(problem.band.t_dec, z[c], problem.band.n_eff_factor, name)),
+                       for interval in mismatch_intervals(
+                           problem.band.t_dec, residual[c] / problem.sigma[c], problem.n_eff_factor, name,
+                           chi2_of=lambda lo, hi, c=c: openworld.interval_chi2(problem, c, residual[c], lo, hi))),
                       key=lambda i: (i["start_s"], i["channel"]))
     say(f"aligned (shift {baseline.params['shift_s'] * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s)")
     start_params = {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())}
     fits, selection = fit_and_select(problem, start_params)
     say(f"fitted {len(fits)} mechanism subsets")
-    if selection.residual_p_value <= RESIDUAL_P:
+    if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
+                                                        for f in (fits[selection.subset], baseline)):
         scaled = replace(problem, calibrate=True)
         scaled_fits, scaled_selection = fit_and_select(scaled, start_params)
         if (plain_bic(scaled, scaled_fits[scaled_selection.subset])
                 < plain_bic(problem, fits[selection.subset]) - MIN_DELTA_BIC):
             problem, fits, selection = scaled, scaled_fits, scaled_selection
         say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
-    improved = fits[selection.subset]
-    bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
+    verdict = decide(problem, fits, selection, baseline)
+    improved = verdict.fit
+    span = openworld.cut_span(problem, improved.params)
+    model_thrust = problem.predict(improved.params, recording.time_s)["thrust_N"]
+    spindle = openworld.spindle_line(recording.time_s, recording.thrust_N, model_thrust, recording.spindle_rpm,
+                                     (span[0] + problem.geometry.cone_mm / problem.geometry.feed_mm_s, span[1]))
+    leftover = problem.y - improved.model
+    for s in verdict.shapes:
+        leftover = leftover - s.contribution()
+    peaks = np.array([max(float(np.max(np.abs(L))), 1e-12) for L in openworld.modelled_loads(problem, improved.params)[1]])
+    unexplained = openworld.report(problem, list(verdict.shapes), leftover, spindle, span, peaks)
+    say(f"named {len(verdict.subset)} mechanism(s), {len(unexplained)} unexplained feature(s)")
     bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
-    mechanisms = explain.mechanisms(problem, improved, selection, bone_mu_w)
+    mechanisms = explain.mechanisms(problem, improved, selection, verdict, bone_mu_w)
     summary = summarise_fit(problem, baseline, improved)
-    return Diagnosis(recording, problem, baseline, fits, selection, mismatch, mechanisms, summary,
-                     time.perf_counter() - start, notes)
+    seconds = time.perf_counter() - start
+    say(f"diagnosed in {seconds:.2f} s")
+    return Diagnosis(recording, problem, baseline, fits, selection, verdict, mismatch, mechanisms, unexplained,
+                     summary, noise_models, _timing(problem, baseline, cortex), label, seconds, tuple(notes))

@@ -47,8 +47,10 @@ def clogging(problem: Problem, fit: Fit, bone_mu_w: float | None) -> tuple[dict,
     """Growth, rise, torque gain and the friction they imply (see the module docstring)."""
     p, g, sim = fit.params, problem.geometry, problem.simulation
     drill = g.drill
-    z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
+    z_max = problem.clogging_span(p)
     growth = p["growth_exponent"]
+    onset = p.get("clogging_onset_mm", 0.0)
+    retained = p.get("clogging_retained")
     F_o = problem.initial_force_N * p.get("thrust_N_scale", 1.0)  # the recording's initial force
     excess = F_o * math.expm1(growth * z_max)
     simulated = float(sim.loads(np.array([sim.contact_s + g.cortex_mm / g.feed_mm_s]))[0][0])
@@ -60,7 +62,9 @@ def clogging(problem: Problem, fit: Fit, bone_mu_w: float | None) -> tuple[dict,
     params = {"growth_exponent_per_diameter": _r(growth), "rise_at_breakthrough": _r(math.expm1(growth * z_max)),
               "excess_thrust_at_breakthrough_N": _r(excess), "initial_force_N": _r(F_o),
               "depth_past_full_engagement_diameters": _r(z_max), "total_growth_exponent": _r(total),
-              "friction_factor_M_mm": _r(M)}
+              "friction_factor_M_mm": _r(M), "onset_mm": _r(onset)}
+    if retained is not None:
+        params["retained_after_breakthrough"] = _r(retained)
     torque_text = ""
     gain = p.get("torque_gain_Nmm_per_N")
     mu_w, source = bone_mu_w, "the bone set at this feed and speed"
@@ -84,7 +88,10 @@ def clogging(problem: Problem, fit: Fit, bone_mu_w: float | None) -> tuple[dict,
     text = (f"After full engagement the thrust rises above the simulation exponentially with depth: "
             f"F_o·(exp(p z) − 1) with p = {growth:.3g} per drill diameter of depth (F_o = {F_o:.3g} N), "
             f"{100 * math.expm1(growth * z_max):.0f} % (+{excess:.3g} N) by breakthrough, {z_max:.2f} diameters "
-            f"past full engagement.{torque_text} This is chip clogging: bone chips packing in the flutes "
+            f"past full engagement"
+            f"{f' and an onset {onset:.2f} mm deeper' if onset > 0.05 else ''}"
+            f"{f'; after breakthrough {100 * retained:.0f} % of it stays' if retained is not None else ''}."
+            f"{torque_text} This is chip clogging: bone chips packing in the flutes "
             f"(thesis Eqs 3.16/3.19), missing from the simulation.{friction_text}")
     return params, text
 
@@ -96,7 +103,7 @@ def pulsation(problem: Problem, fit: Fit) -> tuple[dict, str]:
     f_p = p["pulsation_frequency_hz"]
     phase = math.atan2(p["pulsation_b"], p["pulsation_a"])
     t = np.linspace(0.0, 1.0 / f_p, 400)
-    m, lead = feed_modulation(p, t, 0.0)
+    m, lead = feed_modulation({**p, "pulsation_sweep": 0.0}, t, 0.0)  # one period at f_p
     depth = g.feed_mm_s * np.ptp(lead) / 2
     kappa = p.get("pulsation_sharpness", 0.0)
     params = {"amplitude": _r(A), "frequency_hz": _r(f_p), "phase_rad": _r(phase), "period_s": _r(1 / f_p),
@@ -109,6 +116,14 @@ def pulsation(problem: Problem, fit: Fit) -> tuple[dict, str]:
                f"/tanh({kappa:.2g})), fast and slow halves rather than a sine")
     else:
         law = f"f(t) = f·(1 + {A:.3g}·sin(2π·{f_p:.3g}·t {sign} {abs(phase):.2f}))"
+    sweep = p.get("pulsation_sweep")
+    if sweep is not None:
+        rate = sweep * f_p / (problem.cut_s / 2)
+        params["sweep_hz_per_s"] = _r(rate)
+        params["frequency_at_s"] = _r(problem.sweep_centre_s + p["shift_s"])
+        law += (f", its frequency drifting by {rate:+.3g} Hz/s (f_p = {f_p:.3g} Hz at "
+                f"{problem.sweep_centre_s + p['shift_s']:.2f} s, {f_p * (1 - abs(sweep)):.3g}–"
+                f"{f_p * (1 + abs(sweep)):.3g} Hz over the cut)")
     text = (f"The loads in contact oscillate at {f_p:.3g} Hz (period {1 / f_p:.3g} s) by ±{100 * A:.0f} % "
             f"(±{params['thrust_amplitude_N']:.3g} N of thrust at full engagement): the feed pulsates, {law}, so "
             f"the drill runs up to {1000 * depth:.0f} µm ahead of and behind the nominal depth. This is the "
@@ -155,14 +170,17 @@ EXPLAIN = {"chip_clogging": clogging, "feed_pulsation": pulsation, "sensor_drift
            "thermal_softening": softening}
 
 
-def mechanisms(problem: Problem, fit: Fit, selection: Selection, bone_mu_w: float | None) -> list[dict]:
-    """The contract's ``missing_physics`` entries, strongest evidence first."""
+def mechanisms(problem: Problem, fit: Fit, selection: Selection, verdict, bone_mu_w: float | None) -> list[dict]:
+    """The contract's ``missing_physics`` entries for the named subset (``verdict.subset``),
+    most confident first; confidence from the verdict (:mod:`.verdict`)."""
     out = []
     sizes = effect_sizes(problem, fit)
-    for m in sorted(selection.subset, key=lambda m: -selection.confidence[m]):
+    subset = verdict.subset
+    for m in sorted(subset, key=lambda m: -verdict.confidence[m]):
         args = (problem, fit, bone_mu_w) if m == "chip_clogging" else (problem, fit)
         params, text = EXPLAIN[m](*args)
-        delta = selection.bic[selection.subset - {m}] - selection.bic[selection.subset]
-        out.append({"mechanism": m, "confidence": round(selection.confidence[m], 4), "parameters": params,
-                    "explanation": text, "evidence": {"delta_bic": round(delta, 1), "size": _r(sizes[m])}})
+        delta = selection.bic[subset - {m}] - selection.bic[subset]
+        out.append({"mechanism": m, "confidence": verdict.confidence[m], "parameters": params,
+                    "explanation": text, "evidence": {"delta_bic": round(delta, 1), "size": _r(sizes[m]),
+                                                      "inclusion_probability": round(selection.confidence[m], 4)}})
     return out

@@ -11,8 +11,8 @@ Hz) fits the exact linearisation of the pulsation term in (a, b) — load modula
 lead — together with linear stand-ins for the other mechanisms, one small linear solve per
 frequency; its best local minima of χ² start separate fits. Softening's time constant is seeded by a
 scan of the same kind. Each subset is also started from the best fit of its subsets with one
-mechanism fewer; the best optimum is kept. The pulse-shaped pulsation is fitted only where the
-sine leaves more than noise (:func:`fit_all`).
+mechanism fewer; the best optimum is kept. The pulse-shaped and swept pulsations are fitted
+only where the sine leaves more than noise (:func:`fit_all`).
 """
 
 from __future__ import annotations
@@ -44,11 +44,16 @@ class Fit:
     chi2: np.ndarray             # per channel (weighted by the noise of each sample)
     model: np.ndarray            # smoothed model, channels × instants
     n_params: int
-    pulse: bool = False          # the pulsation is pulse-shaped (sharpness fitted)
+    variant: tuple = ()          # optional pulsation parameters fitted (sharpness, sweep)
 
     @property
     def chi2_total(self) -> float:
         return float(self.chi2.sum())
+
+    @property
+    def pulse(self) -> bool:
+        """The pulsation is pulse-shaped (its sharpness fitted)."""
+        return "pulsation_sharpness" in self.variant
 
 
 def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -65,19 +70,17 @@ def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def project(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray | None = None):
-    """Weighted residuals (per channel, all instants), linear parameters fitted on ``rows``
-    (default all) and the smoothed model, for the nonlinear ``params``."""
+    """Whitened residuals on ``rows`` (default all) per channel, the linear parameters fitted
+    there, and the smoothed model at all instants, for the nonlinear ``params``."""
     parts = problem.design(subset, params)
     names = problem.linear_names(subset)
     residuals, linear, model = [], {}, []
     for c, (base, A) in enumerate(parts):
-        w = 1.0 / problem.sigma[c]
-        use = slice(None) if rows is None else rows
-        target = (problem.y[c] - base) * w
-        Aw = A * w[:, None]
-        beta = _lstsq(Aw[use], target[use])
+        target = problem.whiten(c, problem.y[c] - base, rows)
+        Aw = problem.whiten(c, A, rows)
+        beta = _lstsq(Aw, target)
         if names[c][-1] == "torque_gain_Nmm_per_N" and beta[-1] < 0:  # k_T = R μ_w l_w / M ≥ 0
-            beta = np.append(_lstsq(Aw[use][:, :-1], target[use]), 0.0)
+            beta = np.append(_lstsq(Aw[:, :-1], target), 0.0)
         linear.update(zip(names[c], beta))
         residuals.append(target - Aw @ beta)
         model.append(base + A @ beta)
@@ -87,29 +90,31 @@ def project(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray 
 
 
 def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np.ndarray | None = None,
-               pulse: bool = False, fixed: dict | None = None) -> Fit:
+               variant: tuple = (), fixed: dict | None = None) -> Fit:
     """The best of several bounded least-squares fits of one subset, on ``rows`` (default all),
     with the nonlinear parameters in ``fixed`` held at their values."""
     fixed = fixed or {}
-    names = [n for n in problem.nonlinear_names(subset, pulse) if n not in fixed]
+    names = [n for n in problem.nonlinear_names(subset, variant) if n not in fixed]
     lo, hi = problem.bounds(names)
     best = None
+    if not names:
+        starts = []
     for start in starts:
         x0 = np.clip([start[n] for n in names], lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
 
         def fun(x):
             res, _, _ = project(problem, subset, {**fixed, **dict(zip(names, x))}, rows)
-            return np.concatenate([r if rows is None else r[rows] for r in res])
+            return np.concatenate(res)
 
         sol = optimize.least_squares(fun, x0, bounds=(lo, hi), method="trf", x_scale="jac",
-                                     ftol=1e-6, xtol=1e-6, max_nfev=30 * (len(names) + 1))
+                                     ftol=1e-5, xtol=1e-5, max_nfev=20 * (len(names) + 1))
         if best is None or sol.cost < best.cost:
             best = sol
-    params = {**fixed, **dict(zip(names, best.x))}
+    params = {**fixed, **dict(zip(names, best.x if best is not None else []))}
     res, linear, model = project(problem, subset, params, rows)
-    chi2 = np.array([float(np.sum((r if rows is None else r[rows]) ** 2)) for r in res])
+    chi2 = np.array([float(np.sum(r ** 2)) for r in res])
     n_linear = sum(len(n) for n in problem.linear_names(subset))
-    return Fit(subset, {**params, **linear}, chi2, model, len(names) + len(fixed) + n_linear, pulse)
+    return Fit(subset, {**params, **linear}, chi2, model, len(names) + len(fixed) + n_linear, tuple(variant))
 
 
 def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list[np.ndarray]:
@@ -160,15 +165,15 @@ def _scan(problem: Problem, base_params: dict, shared_of, tau_s: float):
     stand_in = _stand_in_columns(problem, base_params, tau_s)
     base = problem.design(frozenset(), base_params)
     n_channels = len(problem.channels)
-    targets = [(problem.y[c] - base[c][0]) / problem.sigma[c] for c in range(n_channels)]
+    targets = [problem.whiten(c, problem.y[c] - base[c][0]) for c in range(n_channels)]
+    own_w = [problem.whiten(c, stand_in[c]) for c in range(n_channels)]
     results = []
     for key, shared in shared_of():
         blocks = []
         for c in range(n_channels):
-            w = 1.0 / problem.sigma[c]
             own = [np.zeros_like(stand_in[k]) for k in range(n_channels)]
-            own[c] = stand_in[c]
-            blocks.append(np.column_stack([shared[c] * w[:, None]] + [o * w[:, None] for o in own]))
+            own[c] = own_w[c]
+            blocks.append(np.column_stack([problem.whiten(c, shared[c])] + own))
         A, b = np.vstack(blocks), np.concatenate(targets)
         coef, *_ = np.linalg.lstsq(A, b, rcond=None)
         results.append((key, float(np.sum((b - A @ coef) ** 2)), coef))
@@ -179,7 +184,7 @@ def seeds(problem: Problem, base_params: dict) -> dict:
     """Starting values from linearised scans: pulsation frequencies (best few), a, b; softening
     time constant and fraction; growth exponent."""
     def frequencies():
-        for f in FREQUENCY_GRID_HZ:
+        for f in FREQUENCY_GRID_HZ[FREQUENCY_GRID_HZ >= problem.lowest_pulsation_hz]:
             cols = _pulsation_columns(problem, base_params, f)
             yield f, [c.T for c in cols]
 
@@ -211,7 +216,8 @@ def seeds(problem: Problem, base_params: dict) -> dict:
     z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
     rise = max(clog_coef, 0.02) * math.expm1(NOMINAL_GROWTH * z_max) if z_max > 0 else 0.0
     growth = float(np.clip(math.log1p(rise) / z_max if z_max > 0 else NOMINAL_GROWTH, 0.02, 4.0))
-    return {"pulsations": pulsations, "softening": softening, "clogging": {"growth_exponent": growth}}
+    clogging = {"growth_exponent": growth, "clogging_onset_mm": 0.0, "clogging_retained": 0.5}
+    return {"pulsations": pulsations, "softening": softening, "clogging": clogging}
 
 
 def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: dict) -> list[dict]:
@@ -236,26 +242,40 @@ def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: d
     return starts
 
 
+def _variant_stage(problem: Problem, fits: dict, name: str, starts: tuple) -> None:
+    """Refit the subsets with pulsation adding the optional parameter ``name``: first the best
+    one, from each value in ``starts``; if it gains more than the parameter's BIC cost plus
+    ``MIN_PULSE_GAIN`` there, every other one from the value found, kept where it gains as much."""
+    factor = problem.n_eff_factor
+    cost = math.log(problem.y.size * factor) + MIN_PULSE_GAIN
+    pulsed = sorted((s for s in fits if "feed_pulsation" in s), key=lambda s: fits[s].chi2_total)
+    for subset in pulsed:
+        plain = fits[subset]
+        variant = plain.variant + (name,)
+        refit = fit_subset(problem, subset, [{**plain.params, name: v} for v in starts], variant=variant)
+        if (plain.chi2_total - refit.chi2_total) * factor <= cost:
+            if subset == pulsed[0]:
+                return  # no gain where pulsation fits best: the plain form stays everywhere
+            continue
+        fits[subset] = refit
+        starts = (refit.params[name],)
+
+
 def fit_all(problem: Problem, base_params: dict, seed: dict) -> dict:
     """Fits of every subset of mechanisms (in order of size, each seeding the larger ones).
 
     When even the fit with all mechanisms leaves clearly more than noise (χ²/dof above
-    ``PULSE_GATE``), every subset with feed pulsation is refitted with the pulse-shaped waveform
-    from its sine fit; the pulse shape replaces the sine where it lowers χ²·n_eff/n by more than
-    its parameter's BIC cost plus ``MIN_PULSE_GAIN``."""
+    ``PULSE_GATE``), the pulsation's optional forms are tried (:func:`_variant_stage`): the
+    pulse shape (sharpness κ, from 1.5 and 4), then a sweep of its frequency (r, from ±0.2),
+    each on top of the subsets' forms so far."""
     allowed = [m for m in MECHANISMS if m != "chip_clogging" or problem.clogging_possible]
     subsets = [frozenset(m for k, m in enumerate(allowed) if mask >> k & 1) for mask in range(1 << len(allowed))]
     fits: dict = {}
     for subset in sorted(subsets, key=len):
         fits[subset] = fit_subset(problem, subset, starting_points(subset, base_params, seed, fits))
     full = fits[max(fits, key=len)]
-    factor = problem.band.n_eff_factor
+    factor = problem.n_eff_factor
     if full.chi2_total * factor / max(problem.y.size * factor - full.n_params, 1.0) > PULSE_GATE:
-        cost = math.log(problem.y.size * factor) + MIN_PULSE_GAIN
-        for subset in [s for s in fits if "feed_pulsation" in s]:
-            sine = fits[subset]
-            starts = [{**sine.params, "pulsation_sharpness": k} for k in (1.5, 4.0)]
-            pulse = fit_subset(problem, subset, starts, pulse=True)
-            if (sine.chi2_total - pulse.chi2_total) * factor > cost:
-                fits[subset] = pulse
+        _variant_stage(problem, fits, "pulsation_sharpness", (1.5, 4.0))
+        _variant_stage(problem, fits, "pulsation_sweep", (-0.2, 0.2))
     return fits

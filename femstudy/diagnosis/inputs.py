@@ -1,4 +1,9 @@
-"""The two inputs of a diagnosis: the recording's cut and the simulation to compare it with."""
+"""The two inputs of a diagnosis: the recording's cut and the simulation to compare it with.
+
+With a simulated trace, timing and geometry come from the trace (:mod:`.timing`): it is put
+on the recording's clock by correlation, and its breakthrough gives the cortex. Nothing here
+refuses a well-formed pair: a value that cannot be measured is estimated, and a note says how.
+"""
 
 from __future__ import annotations
 
@@ -8,13 +13,14 @@ import numpy as np
 from scipy import ndimage
 
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
+from femstudy.diagnosis.timing import clock_offset_s, trace_events
 from femstudy.drilling.history import DrillingConditions
 from femstudy.errors import UserError, require
 from femstudy.recordings.reader import Recording, read_recording
 
 DIAGNOSED_MODELS = ("allotta", "clogging")
-#: A simulated trace whose rise is further than this from the recording's is on another clock [s].
-CLOCK_TOLERANCE_S = 0.4
+#: A trace whose best correlation lag exceeds this runs on a clock of its own [s].
+CLOCK_TOLERANCE_S = 0.3
 
 
 def cut_phase(rec: Recording):
@@ -26,25 +32,61 @@ def cut_phase(rec: Recording):
                    rec.drill.cone_length_mm, m.get("contact_s"), m.get("cut_end_s"), rec.name)
 
 
-def cortex_thickness(rec: Recording, given: float | None, phase=None) -> float:
-    """Cortex [mm]: ``given``, else the header's ``cortex_mm``, else feed × (breakthrough − contact)."""
+def _header_cortex(rec: Recording) -> float | None:
+    if "cortex_mm" not in rec.metadata:
+        return None
+    value = rec.metadata["cortex_mm"]
+    require(isinstance(value, (int, float)) and value > 0,
+            f"recording {rec.name}: cortex_mm = {value!r} is not a positive length in mm")
+    return float(value)
+
+
+def _given(given: float | None) -> float | None:
     if given is not None:
         require(given > 0, f"--cortex-mm must be positive, got {given}")
         return float(given)
-    if "cortex_mm" in rec.metadata:
-        value = rec.metadata["cortex_mm"]
-        require(isinstance(value, (int, float)) and value > 0,
-                f"recording {rec.name}: cortex_mm = {value!r} is not a positive length in mm")
-        return float(value)
+    return None
+
+
+def cortex_thickness(rec: Recording, given: float | None, phase=None) -> tuple[float, list[str]]:
+    """Cortex [mm] of a recording diagnosed without a simulated trace, and notes on how it was
+    found: ``given``, else the header's ``cortex_mm``, else feed × (breakthrough − contact) from
+    the isolation, else — the cut ends by retraction, or its breakthrough is not seen — the
+    depth the drill reached, feed × (end − contact), which the note says."""
+    value = _given(given)
+    if value is None:
+        value = _header_cortex(rec)
+    if value is not None:
+        return value, []
     phase = phase or cut_phase(rec)
-    require(phase.end_kind == "breakthrough",
-            f"recording {rec.name} ends by retraction, not breakthrough, so its cortex thickness is not "
-            f"measured: give --cortex-mm or '# cortex_mm = ...' in its header")
-    return rec.feed_mm_s * (phase.end_s - phase.contact_s)
+    depth = rec.feed_mm_s * (phase.end_s - phase.contact_s)
+    if phase.end_kind == "breakthrough":
+        return depth, []
+    return depth, [f"no breakthrough is seen in {rec.name} (the cut ends by retraction, or clogging holds the "
+                   f"loads until the drill stops): the cortex is taken as the depth reached, {depth:.2f} mm "
+                   f"(feed x cut duration); give --cortex-mm if it is known"]
+
+
+def trace_cortex(sim: TraceSimulation, rec: Recording, given: float | None) -> tuple[float, list[str]]:
+    """Cortex [mm] for a diagnosis against a simulated trace: ``given``, else the recording's
+    header, else the trace's breakthrough (:mod:`.timing`), else the depth the trace reaches
+    (it does not break through, so clogging grows to its end), with a note."""
+    value = _given(given)
+    if value is None:
+        value = _header_cortex(rec)
+    if value is not None:
+        return value, []
+    events = sim.events
+    if events.cortex_mm is not None and events.cortex_mm > 0:
+        return events.cortex_mm, []
+    depth = max(events.depth_reached_mm, 1e-3)
+    return depth, [f"the simulation does not break through the cortex: the cortex is taken as at least the depth it "
+                   f"reaches, {depth:.2f} mm"]
 
 
 def read_simulation(path, rec: Recording) -> TraceSimulation:
-    """A simulated trace in the recording format; its feed and speed must match the recording's."""
+    """A simulated trace in the recording format, placed on the recording's clock, with its
+    events; its feed and speed must match the recording's."""
     keys = {"feed_mm_s": rec.feed_mm_s, "spindle_rpm": rec.spindle_rpm}
     sim = read_recording(path, keys, override_header=True)
     for key, value in keys.items():
@@ -52,32 +94,30 @@ def read_simulation(path, rec: Recording) -> TraceSimulation:
             if note.startswith(f"{key} = ") and "overrides" in note:
                 raise UserError(f"simulation {sim.name} was computed for {key} = {sim_header_value(note)} but the "
                                 f"recording {rec.name} has {key} = {value:g}")
-    return on_recording_clock(TraceSimulation.from_recording(sim, rec.spindle_rpm), rec)
+    return with_events(on_recording_clock(TraceSimulation.from_recording(sim, rec.spindle_rpm), rec), rec)
 
 
-def _rise_time_s(t: np.ndarray, F: np.ndarray, window: int) -> float:
-    """First time the thrust, averaged over ``window`` samples and measured from its level at
-    the start, exceeds a tenth of its peak."""
-    smooth = ndimage.uniform_filter1d(F, max(window, 1))
-    rise = smooth - np.median(smooth[: max(smooth.size // 20, 1)])
-    return float(t[int(np.argmax(rise > 0.1 * rise.max()))])
+def with_events(sim: TraceSimulation, rec: Recording) -> TraceSimulation:
+    """The trace with its events (contact, full engagement, breakthrough, stop) attached."""
+    sim.events = trace_events(sim.time_s, sim.thrust_N, sim.contact_s, sim.stop_s, rec.feed_mm_s,
+                              rec.spindle_rpm, rec.drill.cone_length_mm)
+    return sim
 
 
 def on_recording_clock(sim: TraceSimulation, rec: Recording) -> TraceSimulation:
     """The trace itself when its clock is the recording's, else moved onto it.
 
-    A trace whose rise (10 % of peak) is more than ``CLOCK_TOLERANCE_S`` from the recording's
-    runs on another clock (an FE history usually starts at contact): it is shifted to put its
-    contact at the contact that :func:`cut_phase` detects, and a note says so. Smaller offsets
-    are left to the alignment."""
-    window = int(round(0.05 * rec.sample_rate_hz))
-    offset = _rise_time_s(rec.time_s, rec.thrust_N, window) - _rise_time_s(sim.time_s, sim.thrust_N, 1)
-    if abs(offset) <= CLOCK_TOLERANCE_S:
+    The lag comes from the correlation of the two (:func:`.timing.clock_offset_s`), which needs
+    no detection of the cut in the recording. A lag within ``CLOCK_TOLERANCE_S`` is left to the
+    alignment; a larger one means the trace runs on a clock of its own (an FE history usually
+    starts at contact): it is moved by the lag, and a note says so."""
+    channels = [rec.thrust_N] + ([rec.torque_Nmm] if rec.torque_Nmm is not None and sim.has_torque else [])
+    lag, value = clock_offset_s(rec.time_s, channels, sim, rec.spindle_rpm)
+    if abs(lag) <= CLOCK_TOLERANCE_S:
         return sim
-    shift = cut_phase(rec).contact_s - sim.contact_s
-    moved = replace(sim, time_s=sim.time_s + shift)
-    moved.note = (f"{sim.label} runs on another clock: shifted by {shift:+.3f} s to put its contact at the "
-                  f"recording's detected contact")
+    moved = replace(sim, time_s=sim.time_s + lag)
+    moved.note = (f"{sim.label} runs on another clock: moved by {lag:+.3f} s, where it correlates best with the "
+                  f"recording (r = {value:.3f})")
     return moved
 
 
@@ -112,11 +152,12 @@ def feed_stop_s(rec: Recording, after_s: float) -> float:
     return best_t
 
 
-def model_simulation(rec: Recording, model: str, bone, cortex_mm: float | None) -> tuple[ModelSimulation, float]:
-    """Load model ``model`` for the recording's conditions, from its detected contact to its stop."""
+def model_simulation(rec: Recording, model: str, bone, cortex_mm: float | None) -> tuple[ModelSimulation, float, list]:
+    """Load model ``model`` for the recording's conditions, from its detected contact to its
+    stop; returns it, the cortex [mm] and notes on how the cortex was found."""
     require(model in DIAGNOSED_MODELS, f"--model must be one of {', '.join(DIAGNOSED_MODELS)}, got '{model}'")
     phase = cut_phase(rec)
-    cortex = cortex_thickness(rec, cortex_mm, phase)
+    cortex, notes = cortex_thickness(rec, cortex_mm, phase)
     cond = DrillingConditions(rec.feed_mm_s, rec.spindle_rpm, cortex, bone, rec.drill)
     stop_s = phase.end_s
     if phase.end_kind == "breakthrough":  # the drill went on into cancellous bone
@@ -125,4 +166,4 @@ def model_simulation(rec: Recording, model: str, bone, cortex_mm: float | None) 
     sim = ModelSimulation(model, cond, phase.contact_s, stop_depth,
                           with_torque=rec.torque_Nmm is not None,
                           max_depth_mm=rec.feed_mm_s * (rec.time_s[-1] - phase.contact_s))
-    return sim, cortex
+    return sim, cortex, notes

@@ -27,8 +27,12 @@ def _log_sf(chi2: float, dof: float) -> float:
     return float(stats.norm.logsf(z))
 
 
-def mismatch_intervals(t: np.ndarray, z: np.ndarray, n_eff_factor: float, channel: str) -> list[dict]:
-    """Intervals [start_s, end_s] where the standardised residual ``z`` is beyond noise."""
+def mismatch_intervals(t: np.ndarray, z: np.ndarray, n_eff_factor: float, channel: str, chi2_of=None) -> list[dict]:
+    """Intervals [start_s, end_s] where the standardised residual ``z`` is beyond noise.
+
+    ``chi2_of(lo, hi)``, when given, is the χ² of instants lo..hi under the noise model
+    (whitened, so the interval's correlations are counted); by default Σ z² scaled by
+    ``n_eff_factor``."""
     n_eff = max(z.size * n_eff_factor, 1.0)
     k = float(stats.norm.isf(ALPHA / (2 * n_eff)))
     flagged = np.flatnonzero(np.abs(z) > k)
@@ -39,8 +43,8 @@ def mismatch_intervals(t: np.ndarray, z: np.ndarray, n_eff_factor: float, channe
     out = []
     for g in groups:
         lo, hi = g[0], g[-1]
-        chi2 = float(np.sum(z[lo:hi + 1] ** 2)) * n_eff_factor
         dof = (hi - lo + 1) * n_eff_factor
+        chi2 = chi2_of(lo, hi) if chi2_of else float(np.sum(z[lo:hi + 1] ** 2)) * n_eff_factor
         significance = -_log_sf(chi2, dof) / np.log(10)
         out.append({"start_s": float(max(t[lo] - step / 2, t[0])), "end_s": float(min(t[hi] + step / 2, t[-1])),
                     "channel": channel, "significance": round(significance, 2),

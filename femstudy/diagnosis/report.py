@@ -21,17 +21,27 @@ def _wrap(text: str, indent: int) -> str:
     return textwrap.fill(text, width=100, initial_indent=" " * indent, subsequent_indent=" " * indent)
 
 
-def summary_text(d: Diagnosis, simulation_label: str) -> str:
-    """The printed summary: inputs, noise, alignment, mismatch, mechanisms, fit, residual check.
-    "Compared below" is the frequency where the smoothing's gain is exp(−1/2)."""
+def summary_text(d: Diagnosis) -> str:
+    """The printed summary: inputs, noise, alignment, mismatch, mechanisms, unexplained
+    features, fit (in-sample and held out), residual check. "Compared below" is the frequency
+    where the smoothing's gain is exp(−1/2)."""
     rec, problem = d.recording, d.problem
     lines = [f"recording {rec.name}: {rec.duration_s:.2f} s at {rec.sample_rate_hz:.0f} Hz, "
              f"f = {rec.feed_mm_s:g} mm/s, N = {rec.spindle_rpm:g} rpm, cortex {problem.geometry.cortex_mm:.2f} mm; "
-             f"simulation: {simulation_label}"]
+             f"simulation: {d.simulation_label}"]
     lines += [f"  note: {n}" for n in d.notes]
     noise = ", ".join(f"{UNITS[c][0]} {s:.3g} {UNITS[c][1]}" for c, s in zip(problem.channels, problem.sigma_raw))
-    lines.append(f"noise (white, from the spectrum above 10 Hz): {noise}; compared below "
+    lines.append(f"noise: white part (spectrum above 10 Hz) {noise}; compared below "
                  f"{1 / (2 * math.pi * problem.band.sigma_s):.1f} Hz at {problem.band.t_dec.size} instants")
+    js = d.to_json()
+    for c, m in js["noise_model"].items():
+        k = problem.channels.index(c)
+        lines.append(f"  {UNITS[c][0]} noise fitted on {m['fitted_on']}: white + coloured, alpha {m['alpha']:.2f} above "
+                     f"{m['corner_hz']:.3g} Hz; {float(np.median(problem.sigma[k])):.3g} {UNITS[c][1]} per compared sample")
+    timing = js["timing"]
+    events = ", ".join(f"{k[:-2].replace('_', ' ')} {v:.2f} s" for k, v in timing.items()
+                       if k.endswith("_s") and isinstance(v, float))
+    lines.append(f"timing (from the simulation, on the recording's clock): {events}")
     a = d.to_json()["alignment"]
     lines.append(f"alignment (not physics): shift {a['shift_s'] * 1e3:+.0f} ms, "
                  + ", ".join(f"{UNITS[c][0]} tare {a[f'{c}_tare']:+.3g} {UNITS[c][1]}" for c in problem.channels)
@@ -61,17 +71,29 @@ def summary_text(d: Diagnosis, simulation_label: str) -> str:
             lines.append(f"  {m['mechanism']} (confidence {m['confidence']:.3f}, drop-one dBIC "
                          f"{m['evidence']['delta_bic']:.4g})")
             lines.append(_wrap(m["explanation"], 4))
+    elif d.unexplained:
+        lines.append("missing physics: none of the catalogue's mechanisms")
     else:
         lines.append("missing physics: none - the simulation explains the recording within the noise")
+    if d.unexplained:
+        lines += ["", "unexplained (outside the catalogue):"]
+        for u in d.unexplained:
+            lines.append(f"  {u['channel']:11s} {u['start_s']:7.2f} - {u['end_s']:7.2f} s   [{u['kind']}]")
+            lines.append(_wrap(u["description"], 4))
     lines.append("")
     for c, s in d.fit_summary.items():
         name, unit = UNITS[c]
         b, i = s["baseline"], s["improved"]
         lines.append(f"fit, {name} over the cut {s['window_s'][0]:.2f}-{s['window_s'][1]:.2f} s: "
-                     f"R2 {b['r2']:.4f} -> {i['r2']:.4f}, RMSE {b['rmse']:.4g} -> {i['rmse']:.4g} {unit}")
-    check = d.to_json()["residual_check"]
-    verdict = ("consistent with noise" if check["consistent_with_noise"]
-               else "NOT consistent with noise: part of the mismatch is not explained by the four mechanisms")
+                     f"R2 {b['r2']:.4f} -> {i['r2']:.4f} in sample, {b['r2_heldout']:.4f} -> {i['r2_heldout']:.4f} "
+                     f"held out; RMSE {b['rmse']:.4g} -> {i['rmse']:.4g} {unit}")
+    check = js["residual_check"]
+    if check["consistent_with_noise"]:
+        verdict = "consistent with the noise model"
+    elif d.unexplained:
+        verdict = "NOT consistent with noise: see 'unexplained'"
+    else:
+        verdict = "NOT consistent with noise, though no feature stands out"
     lines.append(f"residual after the fit: chi2/dof = {check['chi2_per_dof']:.3g} ({verdict})")
     return "\n".join(lines)
 
@@ -80,6 +102,9 @@ def _shade(ax, d: Diagnosis, channel: str) -> None:
     for m in d.mismatch:
         if m["channel"] == channel:
             ax.axvspan(m["start_s"], m["end_s"], color="tab:orange", alpha=0.12, lw=0)
+    for u in d.unexplained:
+        if u["channel"] in (channel, "both"):
+            ax.axvspan(u["start_s"], u["end_s"], fill=False, hatch="//", edgecolor="tab:purple", alpha=0.35, lw=0)
 
 
 def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | None = None) -> None:
@@ -88,7 +113,7 @@ def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | N
     (default all); mismatch intervals shaded."""
     plt = pyplot()
     problem, rec = d.problem, d.recording
-    residuals = ("before", "after") if d.selection.subset else ("before",)
+    residuals = ("before", "after") if d.subset else ("before",)
     kinds = {"both": ("overlay",) + residuals, "overlay": ("overlay",), "residual": residuals}[panels]
     rows = [(c, k) for c in (channels or problem.channels) for k in kinds]
     heights = [1.5 if k == "overlay" else 1.0 for _, k in rows]
@@ -106,7 +131,7 @@ def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | N
             ax.plot(rec.time_s, raw[c], color="0.75", lw=0.4, label="recording")
             ax.plot(t_dec, problem.y[k], "k.", ms=3, label="recording, smoothed")
             ax.plot(t_model, base[c], color="tab:blue", lw=1.2, ls="--", label="simulation")
-            if d.selection.subset:
+            if d.subset:
                 ax.plot(t_model, improved[c], color="tab:red", lw=1.2, label=f"+ {found}")
             ax.set_ylabel(f"{name} [{unit}]")
         else:
@@ -120,7 +145,8 @@ def plot(path, d: Diagnosis, panels: str = "both", channels: tuple[str, ...] | N
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best", framealpha=0.85)
     axes[-1, 0].set_xlabel("time [s]")
-    fig.suptitle(f"{rec.name}: {found} (shaded: mismatch beyond noise)", fontsize=10)
+    extra = f"; unexplained: {', '.join(sorted({u['kind'] for u in d.unexplained}))} (hatched)" if d.unexplained else ""
+    fig.suptitle(f"{rec.name}: {found}{extra} (shaded: mismatch beyond noise)", fontsize=10)
     save(fig, path)
 
 
@@ -141,6 +167,12 @@ def markdown(d: Diagnosis, summary: str) -> str:
         lines += [f"### {m['mechanism']} (confidence {m['confidence']:.3f})", "", m["explanation"], "",
                   "| parameter | value |", "|---|---|"]
         lines += [f"| {k} | {v} |" for k, v in m["parameters"].items()]
+        lines.append("")
+    if d.unexplained:
+        lines += ["## Unexplained (outside the catalogue)", "", "| from [s] | to [s] | channel | kind | description |",
+                  "|---|---|---|---|---|"]
+        lines += [f"| {u['start_s']} | {u['end_s']} | {u['channel']} | {u['kind']} | {u['description']} |"
+                  for u in d.unexplained]
         lines.append("")
     lines += ["## Candidate subsets (BIC, lowest first)", "", "| mechanisms | BIC |", "|---|---|"]
     lines += [f"| {s} | {b:.1f} |" for s, b in list(js["selection"]["bic"].items())[:8]]

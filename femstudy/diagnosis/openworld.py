@@ -1,0 +1,411 @@
+"""What the best catalogue model leaves: located, characterised, reported as "unexplained".
+
+The residual r_c of each channel is searched for structure of generic shapes, each a few
+columns on the modelled load L_c(t) (the fitted simulation with its mechanisms, smoothed like
+the data), fitted by generalised least squares with the recording's noise model:
+
+=================  =================================================  ======================
+shape (``kind``)   columns                                            scanned
+=================  =================================================  ======================
+step               L·H(t − t0): the loads change by a fraction at t0    t0 in the cut
+bump               L·hann((t − t1)/w): a local excess or deficit      t1, w ∈ 0.5–3 s
+oscillation        L·sin 2πft, L·cos 2πft in the cut                  f ∈ 0.2–4 Hz (≥ 1.5
+                                                                      periods in the cut)
+timing             [L(t_c + (1 + ε)(t − t_c − δ)) − L] + a·L: the     ε ∈ ±1–20 %,
+                   events after contact run early or late (the         δ ∈ ±0.3 s
+                   re-timing enters whole) and the loads scale by a
+                   (a feed or clock other than stated); both channels
+load_power         L²/max L, L: an excess growing with the load        —
+=================  =================================================  ======================
+
+Each shape is fitted to both channels (own amplitudes) or to one alone; the variant with the
+larger gain Δχ² − k ln n − 2 ln m wins (k its columns and scanned parameters, m the candidates
+scanned: the best of m tries on pure noise gains about 2 ln m). A shape carried by
+the torque or the thrust alone is reported as ``torque_only`` / ``thrust_only`` (a step or
+bump) or as a one-channel oscillation.
+
+Two uses:
+
+- **Characterising** (:func:`characterise`): on the final residual, the best shape is kept
+  when its gain is at least ``MIN_GAIN`` and its size (the fraction of the load it changes,
+  the stretch for timing) at least ``MIN_SIZE`` — smaller departures are within any model's
+  form tolerance and are not called physics — then removed, and the search repeats
+  (``MAX_SHAPES``). What significant residual is left above that size is located as in
+  :mod:`.locate` and reported as uncharacterised structure.
+- **Competing** (:func:`best_competitor`): a shape that no catalogue mechanism produces can
+  replace a mechanism (:mod:`.verdict`): a step, a bump, a timing error, a load-power excess,
+  and a change or oscillation carried by one channel only (a mechanism acting on the cutting
+  moves both channels). A two-channel oscillation is the feed pulsation's own form and does
+  not compete.
+
+The spindle: a spindle that slows under load raises the feed per revolution and the loads,
+which a scale or clogging would absorb. Its ripple line tells it (:func:`spindle_line`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from femstudy.diagnosis.locate import mismatch_intervals
+from femstudy.diagnosis.mechanisms import Problem
+
+#: Least BIC gain (Δχ² − k ln n) for a shape to be reported.
+MIN_GAIN = 10.0
+#: Least size for a shape to count: fraction of the load (stretch for timing).
+MIN_SIZE = {"step": 0.03, "bump": 0.04, "oscillation": 0.03, "timing": 0.02, "load_power": 0.04}
+#: Least residual, as a fraction of the channel's peak modelled load, reported as structure.
+MIN_STRUCTURE = 0.03
+#: Most shapes reported per diagnosis.
+MAX_SHAPES = 3
+#: Oscillation frequencies scanned [Hz].
+FREQUENCIES_HZ = np.geomspace(0.2, 4.0, 90)
+#: Bump widths scanned [s].
+BUMP_WIDTHS_S = (0.5, 1.0, 2.0, 3.0)
+#: Stretches of the timing shape scanned (fractions, both signs).
+STRETCHES = np.geomspace(0.01, 0.2, 20)
+#: Delays of the timing shape scanned [s]: the alignment was made without the stretch.
+DELAYS_S = np.linspace(-0.3, 0.3, 21)
+#: A spindle line this far (fraction) below the stated N/60 is reported.
+SPINDLE_DROP = 0.04
+#: A spindle line must stand this far (power ratio) above the median of its search band.
+SPINDLE_CONTRAST = 30.0
+
+NAME = {"thrust_N": "thrust", "torque_Nmm": "torque"}
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A fitted shape: kind, scanned parameters, and per channel its columns, amplitudes
+    (zero where the channel does not carry it) and Δχ²."""
+
+    kind: str
+    parameters: dict
+    used: tuple                # per channel: carries the shape
+    columns: tuple             # per channel: smoothed columns (instants × k)
+    coefficients: tuple        # per channel: fitted amplitudes
+    chi2_gain: tuple           # per channel: Δχ² (0 where not used)
+    gain: float                # Σ Δχ² − k ln n
+    interval: tuple            # (start_s, end_s)
+    n_params: int              # k: amplitudes and scanned parameters
+    scanned: int               # scanned parameters (of k)
+
+    @property
+    def size(self) -> float:
+        """The fraction of the load changed (amplitude for an oscillation, stretch for timing)."""
+        if self.kind == "timing":
+            return abs(self.parameters["stretch"])
+        amounts = [abs(float(b[0])) if self.kind != "oscillation" else float(np.hypot(*b[:2]))
+                   for b, u in zip(self.coefficients, self.used) if u]
+        return max(amounts) if amounts else 0.0
+
+    def contribution(self) -> np.ndarray:
+        """The shape's fitted contribution, channels × instants."""
+        return np.vstack([A @ b for A, b in zip(self.columns, self.coefficients)])
+
+    def free_columns(self) -> tuple:
+        """Per channel, the columns to refit with a model: a fixed first column (timing) enters
+        whole as one column with the fitted amplitude's companion; unused channels get none."""
+        out = []
+        for A, b, u in zip(self.columns, self.coefficients, self.used):
+            if not u:
+                out.append(())
+            elif self.kind in FIXED_FIRST:
+                out.append((A[:, 0], A[:, 1]))
+            else:
+                out.append(tuple(A.T))
+        return tuple(out)
+
+    def one_channel(self) -> bool:
+        return len(self.used) == 2 and sum(self.used) == 1
+
+
+def modelled_loads(problem: Problem, params: dict, t: np.ndarray | None = None) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The modelled loads at ``t`` (default the model grid): mechanisms applied, scaled, no
+    tare or drift."""
+    t = problem.band.t_model if t is None else t
+    terms = problem.terms(params, t)
+    out = []
+    for c in problem.channels:
+        load = terms[c] * params.get(f"{c}_scale", 1.0)
+        if c == "torque_Nmm" and "clog" in terms and "torque_gain_Nmm_per_N" in params:
+            load = load + params["torque_gain_Nmm_per_N"] * params.get("thrust_N_scale", 1.0) * terms["clog"]
+        out.append(load)
+    return t, out
+
+
+def cut_span(problem: Problem, params: dict) -> tuple[float, float]:
+    """Contact and feed stop on the recording's clock [s] (the window's end if the simulation
+    does not stop inside it)."""
+    sim = problem.simulation
+    shift = params["shift_s"]
+    stop = (sim.contact_s + params["stop_depth_mm"] / problem.geometry.feed_mm_s
+            if sim.stop_is_parameter else sim.stop_s)
+    end = float(problem.band.t_dec[-1])
+    return sim.contact_s + shift, min(stop + shift, end) if math.isfinite(stop) else end
+
+
+def _candidates(problem: Problem, params: dict):
+    """(kind, candidates, make(channel, load, candidate) -> columns, width, scanned, interval)."""
+    t, _ = modelled_loads(problem, params)
+    t0, t1 = cut_span(problem, params)
+    in_cut = (t >= t0) & (t <= t1)
+    step = problem.band.sigma_s / 2
+    edge = 3 * problem.band.sigma_s  # a step at contact or at the stop is the simulation's timing
+    steps = [{"time_s": float(s)} for s in np.arange(t0 + edge, t1 - edge, step)]
+    # a bump rises and falls back inside the cut: one cut short by contact or the stop is not local
+    bumps = [{"start_s": float(s), "width_s": w} for w in BUMP_WIDTHS_S
+             for s in np.arange(t0, t1 - w, max(step, w / 8))]
+    cycles = [{"frequency_hz": float(f)} for f in FREQUENCIES_HZ if f * (t1 - t0) >= 1.5]
+    retimings = [{"stretch": float(e), "delay_s": float(d)} for e in np.concatenate([-STRETCHES, STRETCHES])
+                 for d in DELAYS_S]
+    _, loads = modelled_loads(problem, params)
+
+    def retimed(c, p):
+        return np.interp(t0 + (t - t0 - p["delay_s"]) * (1 + p["stretch"]), t, loads[c])
+
+    def hann(p):
+        u = (t - p["start_s"]) / p["width_s"]
+        return np.where((u > 0) & (u < 1), 0.5 * (1 - np.cos(2 * math.pi * u)), 0.0)
+
+    peak = lambda L: max(float(np.max(np.abs(L))), 1e-12)
+    return [
+        ("step", steps, lambda c, L, p: [L * (t >= p["time_s"])], 1, 1, lambda p: (p["time_s"], t1)),
+        ("bump", bumps, lambda c, L, p: [L * hann(p)], 1, 2, lambda p: (p["start_s"], p["start_s"] + p["width_s"])),
+        ("oscillation", cycles, lambda c, L, p: [L * in_cut * np.sin(2 * math.pi * p["frequency_hz"] * t),
+                                                 L * in_cut * np.cos(2 * math.pi * p["frequency_hz"] * t)], 2, 1,
+         lambda p: (t0, t1)),
+        ("timing", retimings, lambda c, L, p: [retimed(c, p) - L, L], 2, 2, lambda p: (t0, t1)),
+        ("load_power", [{}], lambda c, L, p: [L ** 2 / peak(L), L], 2, 0, lambda p: (t0, t1)),
+    ]
+
+
+def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[np.ndarray], width: int, fixed: bool):
+    """Per channel and candidate: Δχ² of a GLS fit of the candidate's ``width`` columns, and the
+    amplitudes. With ``fixed`` the first column enters with coefficient 1 (not fitted)."""
+    gains, coefs = [], []
+    for c, (r, X) in enumerate(zip(residuals, blocks)):
+        rw = problem.whiten(c, r)
+        Xw = problem.whiten(c, X)
+        m = X.shape[1] // width
+        Xw = Xw.reshape(Xw.shape[0], m, width).transpose(1, 0, 2)   # candidates × instants × width
+        if fixed:
+            e = rw[None, :] - Xw[:, :, 0]
+            free = Xw[:, :, 1:]
+        else:
+            e = np.broadcast_to(rw, (m, rw.size))
+            free = Xw
+        G = np.einsum("kiw,kiv->kwv", free, free) + 1e-12 * np.eye(free.shape[2])[None]
+        b = np.einsum("kiw,ki->kw", free, e)
+        beta = np.linalg.solve(G, b[..., None])[..., 0]
+        gain = float(rw @ rw) - (np.einsum("ki,ki->k", e, e) - np.einsum("kw,kw->k", b, beta))
+        gains.append(gain)
+        coefs.append(np.concatenate([np.ones((m, 1)), beta], axis=1) if fixed else beta)
+    return np.array(gains), coefs
+
+
+def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=None,
+           one_channel_only: tuple = ()) -> list[Shape]:
+    """The best candidate of each kind on ``residuals`` (best channel variant), restricted to
+    ``kinds`` if given; kinds in ``one_channel_only`` may use one channel only."""
+    t, loads = modelled_loads(problem, params)
+    n = problem.y.size
+    n_ch = len(problem.channels)
+    variants = [tuple(True for _ in range(n_ch))]
+    if n_ch == 2:
+        variants += [(True, False), (False, True)]
+    out = []
+    for kind, candidates, make, width, scanned, interval_of in _candidates(problem, params):
+        if (kinds is not None and kind not in kinds) or not candidates:
+            continue
+        blocks = [problem.band.smooth_model(np.vstack([col for cand in candidates for col in make(c, L, cand)])).T
+                  for c, L in enumerate(loads)]
+        fixed = kind in FIXED_FIRST
+        gains, coefs = _gains(problem, residuals, blocks, width, fixed)
+        best = None
+        for used in variants:
+            if (kind in one_channel_only and sum(used) != 1) or (fixed and not all(used)):
+                continue
+            k = (width - fixed) * sum(used) + scanned
+            look_elsewhere = 2 * math.log(len(candidates))  # the best of many tries: its expected noise gain
+            total = sum(gains[c] for c in range(n_ch) if used[c]) - k * math.log(n) - look_elsewhere
+            j = int(np.argmax(total))
+            if best is None or total[j] > best[0]:
+                best = (float(total[j]), j, used, k)
+        gain, j, used, k = best
+        out.append(Shape(kind, dict(candidates[j]), used,
+                         tuple(blk[:, j * width:(j + 1) * width] for blk in blocks),
+                         tuple(coefs[c][j] if used[c] else np.zeros(width) for c in range(n_ch)),
+                         tuple(float(gains[c][j]) if used[c] else 0.0 for c in range(n_ch)),
+                         gain, interval_of(candidates[j]), k, scanned))
+    return out
+
+
+def material(shape: Shape) -> bool:
+    """Gain and size both large enough to report (``MIN_GAIN``, ``MIN_SIZE``)."""
+    return shape.gain >= MIN_GAIN and shape.size >= MIN_SIZE[shape.kind]
+
+
+def characterise(problem: Problem, params: dict, residual: np.ndarray) -> list[Shape]:
+    """Greedy search of material shapes in ``residual`` (channels × instants), see the module."""
+    remaining = [residual[c].copy() for c in range(len(problem.channels))]
+    found: list[Shape] = []
+    for _ in range(MAX_SHAPES):
+        candidates = [s for s in shapes(problem, params, remaining) if material(s)]
+        if not candidates:
+            break
+        best = max(candidates, key=lambda s: s.gain)
+        found.append(best)
+        remaining = [r - d for r, d in zip(remaining, best.contribution())]
+    return found
+
+
+COMPETING = ("step", "bump", "timing", "load_power", "oscillation")
+#: Shapes whose first column is a fixed change of the model (the re-timing), not an amplitude.
+FIXED_FIRST = ("timing",)
+
+
+def best_competitor(problem: Problem, params: dict, residual: np.ndarray) -> Shape | None:
+    """The material shape that best explains ``residual`` among those no mechanism produces
+    (see the module; an oscillation competes only when one channel carries it)."""
+    one = ("oscillation",) if problem.has_torque else ()
+    kinds = COMPETING if problem.has_torque else tuple(k for k in COMPETING if k != "oscillation")
+    found = [s for s in shapes(problem, params, [r for r in residual], kinds, one) if material(s)]
+    return max(found, key=lambda s: s.gain) if found else None
+
+
+def spindle_line(time_s: np.ndarray, thrust_N: np.ndarray, model_thrust: np.ndarray, spindle_rpm: float,
+                 span: tuple[float, float]) -> dict | None:
+    """The spindle's ripple line in the loaded cut, when it lies more than ``SPINDLE_DROP``
+    below N/60; None otherwise or when no line stands out.
+
+    Parameters
+    ----------
+    time_s, thrust_N : the raw recording [s], [N].
+    model_thrust : the modelled thrust at ``time_s`` [N] (removed before the spectrum).
+    spindle_rpm : the stated speed [rpm].
+    span : the loaded part of the cut [s].
+
+    Returns
+    -------
+    dict with the measured and stated line [Hz] and the speed drop (fraction), or None.
+
+    Example
+    -------
+    >>> t = np.arange(0, 6, 1e-3)
+    >>> F = 20 * (1 + 0.05 * np.sin(2 * np.pi * 15 * t))
+    >>> round(spindle_line(t, F, np.full_like(t, 20.0), 1000, (1, 5))["speed_drop"], 2)
+    0.1
+    """
+    inside = (time_s >= span[0]) & (time_s <= span[1])
+    if np.count_nonzero(inside) < 256:
+        return None
+    fs = 1.0 / float(np.median(np.diff(time_s)))
+    nominal = spindle_rpm / 60.0
+    x = thrust_N[inside] - model_thrust[inside]
+    n_fft = 1 << int(math.ceil(math.log2(x.size * 8)))
+    f = np.fft.rfftfreq(n_fft, 1.0 / fs)
+    power = np.abs(np.fft.rfft(signal.detrend(x) * np.hanning(x.size), n_fft)) ** 2
+    best = None
+    for harmonic in (1, 2):
+        band = (f >= 0.6 * harmonic * nominal) & (f <= 1.1 * harmonic * nominal) & (f < 0.45 * fs)
+        if np.count_nonzero(band) < 10:
+            continue
+        k = int(np.flatnonzero(band)[np.argmax(power[band])])
+        contrast = power[k] / float(np.median(power[band]))
+        if best is None or contrast > best[1]:
+            best = (f[k] / harmonic, contrast)
+    if best is None or best[1] < SPINDLE_CONTRAST:
+        return None
+    resolution = fs / x.size
+    drop = 1.0 - best[0] / nominal
+    if drop < max(SPINDLE_DROP, 1.5 * resolution / nominal):
+        return None
+    return {"line_hz": round(float(best[0]), 3), "stated_hz": round(nominal, 3), "speed_drop": round(float(drop), 4)}
+
+
+def describe(problem: Problem, shape: Shape) -> tuple[str, str, str]:
+    """(kind, channel, description) of a shape for the report."""
+    names = [c for c, u in zip(problem.channels, shape.used) if u]
+    channel = names[0] if len(names) == 1 else "both"
+    only = f"{NAME[names[0]]} only" if shape.one_channel() else ""
+    coef = dict(zip(problem.channels, shape.coefficients))
+    pct = {n: 100 * float(coef[n][0]) for n in names}
+    amounts = " and ".join(f"the {NAME[n]} by {pct[n]:+.1f} %" for n in names)
+    p = shape.parameters
+    if shape.kind == "step" and only:
+        kind = f"{NAME[names[0]]}_only"
+        text = (f"{only}: from {p['time_s']:.2f} s the {NAME[names[0]]} changes by {pct[names[0]]:+.1f} % while the "
+                f"other channel follows the model: friction on the drill's body or in the flutes that loads one "
+                f"channel and not the other, or a change in one sensor channel.")
+    elif shape.kind == "step":
+        kind = "step"
+        text = (f"a step at {p['time_s']:.2f} s: {amounts} from then on. No catalogue mechanism changes the loads "
+                f"at one instant (a chip plug breaking off, a crack, a slip).")
+    elif shape.kind == "bump":
+        kind = f"{NAME[names[0]]}_only" if only else "bump"
+        text = (f"a local change between {p['start_s']:.2f} and {p['start_s'] + p['width_s']:.2f} s: {amounts} "
+                f"there{', ' + only if only else ''}, as from a harder or softer layer of bone.")
+    elif shape.kind == "oscillation":
+        kind = "oscillation"
+        amp = {n: 100 * float(np.hypot(*coef[n][:2])) for n in names}
+        text = (f"an oscillation at {p['frequency_hz']:.2f} Hz in {only or 'both channels'}, ±"
+                + " and ±".join(f"{amp[n]:.1f} % of the {NAME[n]}" for n in names)
+                + (": a feed pulsation would move thrust and torque together, so this is another vibration "
+                   "(fixture, bone support, misalignment)." if only else
+                   ", not of the feed pulsation's form (its depth lead and coupling do not fit)."))
+    elif shape.kind == "timing":
+        kind = "timing"
+        stretch = 100 * p["stretch"]
+        scales = " and ".join(f"the {NAME[n]} by {100 * float(coef[n][1]):+.1f} %" for n in names)
+        text = (f"a timing mismatch: after contact the recording runs {abs(stretch):.1f} % "
+                f"{'ahead of' if stretch > 0 else 'behind'} the simulation (its breakthrough and stop come "
+                f"{'earlier' if stretch > 0 else 'later'}), with {scales}: the feed rate or the recording's clock "
+                f"is not the stated one.")
+    else:
+        kind = "load_power"
+        text = (f"an excess that grows with the load itself ({amounts} at the peak load), as when the spindle "
+                f"slows under load or the sensor is non-linear.")
+    return kind, channel, text
+
+
+def report(problem: Problem, found: list[Shape], leftover: np.ndarray, spindle: dict | None,
+           span: tuple[float, float], peak_loads: np.ndarray) -> list[dict]:
+    """The contract's ``unexplained`` entries: described shapes, the spindle, and located
+    residual the shapes leave that is larger than ``MIN_STRUCTURE`` of the peak load."""
+    out = []
+    if spindle is not None:
+        out.append({"start_s": round(span[0], 3), "end_s": round(span[1], 3), "channel": "both", "kind": "spindle",
+                    "description": (f"the spindle turns slower than stated while cutting: its ripple line is at "
+                                    f"{spindle['line_hz']:.2f} Hz, {100 * spindle['speed_drop']:.0f} % below "
+                                    f"N/60 = {spindle['stated_hz']:.2f} Hz, so the feed per revolution and the "
+                                    f"loads are higher (a spindle slowing under load, or a wrong spindle_rpm)."),
+                    "evidence": spindle})
+    for s in found:
+        kind, channel, text = describe(problem, s)
+        out.append({"start_s": round(float(s.interval[0]), 3), "end_s": round(float(s.interval[1]), 3),
+                    "channel": channel, "kind": kind, "description": text,
+                    "evidence": {"delta_bic": round(s.gain, 1), "size": round(s.size, 4),
+                                 **{k: round(v, 4) for k, v in s.parameters.items()}}})
+    z = leftover / problem.sigma
+    for c, name in enumerate(problem.channels):
+        big = np.abs(leftover[c]) >= MIN_STRUCTURE * peak_loads[c]
+        for interval in mismatch_intervals(problem.band.t_dec, np.where(big, z[c], 0.0), problem.n_eff_factor, name,
+                                           chi2_of=lambda lo, hi, c=c: interval_chi2(problem, c, leftover[c], lo, hi)):
+            out.append({"start_s": round(interval["start_s"], 3), "end_s": round(interval["end_s"], 3),
+                        "channel": name, "kind": "structure",
+                        "description": f"residual structure in the {NAME[name]} that none of the shapes describes "
+                                       f"(up to {100 * float(np.max(np.abs(leftover[c][(problem.band.t_dec >= interval['start_s']) & (problem.band.t_dec <= interval['end_s'])]))) / peak_loads[c]:.0f} % "
+                                       f"of the peak load, max |z| = {interval['max_abs_z']:.1f})",
+                        "evidence": {"significance": interval["significance"]}})
+    return sorted(out, key=lambda u: (u["start_s"], u["channel"]))
+
+
+def interval_chi2(problem: Problem, c: int, r: np.ndarray, lo: int, hi: int) -> float:
+    """χ² of channel ``c``'s residual ``r`` over instants lo..hi under the noise model."""
+    rows = np.zeros(r.size, dtype=bool)
+    rows[lo:hi + 1] = True
+    return float(np.sum(problem.whiten(c, r, rows) ** 2))

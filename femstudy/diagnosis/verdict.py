@@ -1,0 +1,119 @@
+"""The verdict: which mechanisms are named, how confident, and what is left unexplained.
+
+1. The selection (:mod:`.select`) names a subset S of the catalogue.
+2. **Replacement test**: mechanisms M ⊆ S are not named when a single shape that no catalogue
+   mechanism produces (:func:`.openworld.best_competitor`: a step, a bump, a timing error, a
+   load-power excess, a one-channel change or oscillation) explains the data clearly better in
+   their place: BIC(S − M + shape) < BIC(S) − ``MIN_DELTA_BIC``, with the selection's misfit
+   inflation (mechanisms, the physics expected a priori, keep the benefit of the doubt). The
+   shape is found on the residual of S − M, then S − M is refitted with the shape's columns
+   (alignment, tares and the remaining mechanisms follow it); the largest BIC gain wins,
+   repeated until nothing is replaced. This is what keeps a chip breaking off
+   from being named softening, or a thrust-only vibration feed pulsation.
+3. **Unexplained**: the residual of the named model is characterised (:func:`.openworld.characterise`).
+4. **Confidence** of a named mechanism: its posterior inclusion probability (BIC weights)
+   times the share of the mismatch the final model explains, 1 − excess(final)/excess(baseline)
+   with excess = max(χ² − dof, 0) under the noise model; when the final residual is not
+   consistent with noise it is at most ``FAILED_TEST_CAP``. A confidence near 1 thus says both
+   that the mechanism is needed and that the model with it explains the recording.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import stats
+
+from femstudy.diagnosis import openworld
+from femstudy.diagnosis.fit import Fit, fit_subset
+from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection
+
+#: Highest confidence when the final residual is not consistent with noise.
+FAILED_TEST_CAP = 0.8
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The named subset, its fit, the shapes left unexplained and the confidences."""
+
+    subset: frozenset
+    fit: Fit
+    shapes: tuple
+    dropped: dict                  # mechanism -> the shape that replaced it
+    confidence: dict               # mechanism -> confidence
+    chi2_per_dof: float
+    residual_p_value: float
+
+    @property
+    def consistent_with_noise(self) -> bool:
+        return self.residual_p_value > RESIDUAL_P
+
+
+def residual_test(problem: Problem, fit: Fit) -> tuple[float, float]:
+    """χ²/dof and the p-value of the χ² test of ``fit``'s residual under the noise model."""
+    dof = max(problem.y.size * problem.n_eff_factor - fit.n_params, 1.0)
+    chi2 = fit.chi2_total * problem.n_eff_factor
+    return chi2 / dof, float(stats.chi2.sf(chi2, dof))
+
+
+def _excess(problem: Problem, fit: Fit) -> float:
+    return max(fit.chi2_total * problem.n_eff_factor - (problem.y.size * problem.n_eff_factor - fit.n_params), 0.0)
+
+
+def _bic(problem: Problem, chi2: np.ndarray, n_params: int, inflation: np.ndarray) -> float:
+    n_eff = problem.y.size * problem.n_eff_factor
+    return float(np.sum(chi2 / inflation)) * problem.n_eff_factor + n_params * math.log(n_eff)
+
+
+def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation: np.ndarray) -> tuple[frozenset, dict]:
+    """Step 2 of the module: the subset left once a shape has replaced what it explains better.
+    Every proper part S' of the named subset S is tried with the best competing shape on the
+    residual of S' (one shape may stand in for several mechanisms that together mimic it)."""
+    dropped = {}
+    while subset:
+        full = _bic(problem, fits[subset].chi2, fits[subset].n_params, inflation)
+        best = None
+        for size in range(len(subset)):
+            for kept in itertools.combinations(sorted(subset), size):
+                smaller = fits[frozenset(kept)]
+                shape = openworld.best_competitor(problem, smaller.params, problem.y - smaller.model)
+                if shape is None:
+                    continue
+                refit = _with_shape(problem, smaller, shape)
+                delta = full - _bic(problem, refit.chi2, refit.n_params + shape.scanned, inflation)
+                if delta >= MIN_DELTA_BIC and (best is None or delta > best[0]):
+                    best = (delta, frozenset(kept), shape)
+        if best is None:
+            break
+        delta, kept, shape = best
+        kind, channel, _ = openworld.describe(problem, shape)
+        for m in subset - kept:
+            dropped[m] = (f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its place "
+                          f"(BIC lower by {delta:.1f})")
+        subset = kept
+    return subset, dropped
+
+
+def _with_shape(problem: Problem, fit: Fit, shape) -> Fit:
+    """``fit``'s subset refitted with the shape's columns added (its scanned parameters held),
+    so that the alignment and the tares can follow the shape."""
+    names = problem.nonlinear_names(fit.subset, fit.variant)
+    return fit_subset(replace(problem, extra=shape.free_columns()), fit.subset,
+                      [{n: fit.params[n] for n in names}], variant=fit.variant)
+
+
+def decide(problem: Problem, fits: dict, selection: Selection, baseline: Fit) -> Verdict:
+    """Steps 2–4 of the module."""
+    subset, dropped = replace_by_shapes(problem, fits, selection.subset, selection.inflation)
+    fit = fits[subset]
+    found = openworld.characterise(problem, fit.params, problem.y - fit.model)
+    chi2_dof, p_value = residual_test(problem, fit)
+    base_excess = _excess(problem, baseline)
+    share = 1.0 - _excess(problem, fit) / base_excess if base_excess > 0 else 1.0
+    cap = 1.0 if p_value > RESIDUAL_P else FAILED_TEST_CAP
+    confidence = {m: round(float(selection.confidence.get(m, 0.0) * min(max(share, 0.0), cap)), 4) for m in subset}
+    return Verdict(subset, fit, tuple(found), dropped, confidence, chi2_dof, p_value)
