@@ -8,7 +8,13 @@ the data), fitted by generalised least squares with the recording's noise model:
 shape (``kind``)   columns                                            scanned
 =================  =================================================  ======================
 step               L·H(t − t0): the loads change by a fraction at t0    t0 in the cut
-bump               L·hann((t − t1)/w): a local excess or deficit      t1, w ∈ 0.5–3 s
+bump               L·hann((t − t1)/w): a local excess or deficit; or  t1; w ∈ 0.5–3 s, or
+                   L·layer(t): the share of the lips inside a layer   d ∈ 0.25–2 mm
+                   of thickness d entered by the tip at t1, weighted
+                   uniformly along the lip (thrust) or by radius
+                   (torque, so it lags the thrust); the layer may end
+                   after the cut if half its fall comes before the
+                   cut ends and the tip leaves the cortex
 oscillation        L·sin 2πft, L·cos 2πft in the cut                  f ∈ 0.2–4 Hz (≥ 1.5
                                                                       periods in the cut)
 timing             [L(t_c + (1 + ε)(t − t_c − δ)) − L] + a·L: the     ε ∈ ±1–20 %,
@@ -32,7 +38,7 @@ Two uses:
   form tolerance and are not called physics — then removed, and the search repeats
   (``MAX_SHAPES``). What significant residual is left above that size is located as in
   :mod:`.locate` and reported as uncharacterised structure.
-- **Competing** (:func:`best_competitor`): a shape that no catalogue mechanism produces can
+- **Competing** (:func:`competitors`): a shape that no catalogue mechanism produces can
   replace a mechanism (:mod:`.verdict`): a step, a bump, a timing error, a load-power excess,
   and a change or oscillation carried by one channel only (a mechanism acting on the cutting
   moves both channels). A two-channel oscillation is the feed pulsation's own form and does
@@ -65,6 +71,9 @@ MAX_SHAPES = 3
 FREQUENCIES_HZ = np.geomspace(0.2, 4.0, 90)
 #: Bump widths scanned [s].
 BUMP_WIDTHS_S = (0.5, 1.0, 2.0, 3.0)
+#: Layer thicknesses scanned for the layer-shaped bump [mm], and lip points in its quadrature.
+LAYER_THICKNESS_MM = (0.25, 0.5, 1.0, 2.0)
+LIP_POINTS = 24
 #: Stretches of the timing shape scanned (fractions, both signs).
 STRETCHES = np.geomspace(0.01, 0.2, 20)
 #: Delays of the timing shape scanned [s]: the alignment was made without the stretch.
@@ -149,7 +158,8 @@ def cut_span(problem: Problem, params: dict) -> tuple[float, float]:
 
 
 def _candidates(problem: Problem, params: dict):
-    """(kind, candidates, make(channel, load, candidate) -> columns, width, scanned, interval)."""
+    """(kind, candidates, make(channel, load, candidate) -> columns, width, scanned, interval,
+    refine(candidate) -> candidates around it, or None)."""
     t, _ = modelled_loads(problem, params)
     t0, t1 = cut_span(problem, params)
     in_cut = (t >= t0) & (t <= t1)
@@ -157,8 +167,27 @@ def _candidates(problem: Problem, params: dict):
     edge = 3 * problem.band.sigma_s  # a step at contact or at the stop is the simulation's timing
     steps = [{"time_s": float(s)} for s in np.arange(t0 + edge, t1 - edge, step)]
     # a bump rises and falls back inside the cut: one cut short by contact or the stop is not local
+    feed, cone = problem.geometry.feed_mm_s, problem.geometry.cone_mm
     bumps = [{"start_s": float(s), "width_s": w} for w in BUMP_WIDTHS_S
              for s in np.arange(t0, t1 - w, max(step, w / 8))]
+    # ... or falls back at least halfway before the cut ends or the tip leaves the cortex
+    t_layers = min(t1, t0 + problem.geometry.cortex_mm / feed)
+    for d in LAYER_THICKNESS_MM:
+        w, ramp = (d + cone) / feed, min(d, cone) / feed
+        bumps += [{"start_s": float(s), "width_s": w, "thickness_mm": d}
+                  for s in np.arange(t0, t_layers - w + ramp / 2, max(step, w / 8))]
+    def layer_neighbours(p):
+        """Layers around a scanned one: thickness ×0.8–1.25, the tip's entry ± half a start step."""
+        if "thickness_mm" not in p:
+            return []
+        out = []
+        for d in p["thickness_mm"] * np.geomspace(0.8, 1.25, 7):
+            w = float((d + cone) / feed)
+            out += [{"start_s": float(s), "width_s": w, "thickness_mm": float(d)}
+                    for s in p["start_s"] + np.linspace(-0.5, 0.5, 5) * max(step, w / 8)
+                    if t0 <= s < t_layers - w + min(d, cone) / feed / 2]
+        return out
+
     cycles = [{"frequency_hz": float(f)} for f in FREQUENCIES_HZ if f * (t1 - t0) >= 1.5]
     retimings = [{"stretch": float(e), "delay_s": float(d)} for e in np.concatenate([-STRETCHES, STRETCHES])
                  for d in DELAYS_S]
@@ -167,19 +196,29 @@ def _candidates(problem: Problem, params: dict):
     def retimed(c, p):
         return np.interp(t0 + (t - t0 - p["delay_s"]) * (1 + p["stretch"]), t, loads[c])
 
-    def hann(p):
-        u = (t - p["start_s"]) / p["width_s"]
-        return np.where((u > 0) & (u < 1), 0.5 * (1 - np.cos(2 * math.pi * u)), 0.0)
+    radius = (np.arange(LIP_POINTS) + 0.5) / LIP_POINTS   # along the lip, tip to corner (fraction of R)
+
+    def bump(c, p):
+        """A Hann window, or the share of the lips inside a layer (``thickness_mm``): the lip
+        point at radius ρR is ρ·cone behind the tip; thrust weights the lip uniformly, torque by ρ."""
+        if "thickness_mm" not in p:
+            u = (t - p["start_s"]) / p["width_s"]
+            return np.where((u > 0) & (u < 1), 0.5 * (1 - np.cos(2 * math.pi * u)), 0.0)
+        below_top = feed * (t[:, None] - p["start_s"]) - radius[None, :] * cone
+        inside = (below_top >= 0) & (below_top <= p["thickness_mm"])
+        weight = radius if problem.channels[c] == "torque_Nmm" else np.ones_like(radius)
+        return inside @ weight / weight.sum()
 
     peak = lambda L: max(float(np.max(np.abs(L))), 1e-12)
     return [
-        ("step", steps, lambda c, L, p: [L * (t >= p["time_s"])], 1, 1, lambda p: (p["time_s"], t1)),
-        ("bump", bumps, lambda c, L, p: [L * hann(p)], 1, 2, lambda p: (p["start_s"], p["start_s"] + p["width_s"])),
+        ("step", steps, lambda c, L, p: [L * (t >= p["time_s"])], 1, 1, lambda p: (p["time_s"], t1), None),
+        ("bump", bumps, lambda c, L, p: [L * bump(c, p)], 1, 2, lambda p: (p["start_s"], p["start_s"] + p["width_s"]),
+         layer_neighbours),
         ("oscillation", cycles, lambda c, L, p: [L * in_cut * np.sin(2 * math.pi * p["frequency_hz"] * t),
                                                  L * in_cut * np.cos(2 * math.pi * p["frequency_hz"] * t)], 2, 1,
-         lambda p: (t0, t1)),
-        ("timing", retimings, lambda c, L, p: [retimed(c, p) - L, L], 2, 2, lambda p: (t0, t1)),
-        ("load_power", [{}], lambda c, L, p: [L ** 2 / peak(L), L], 2, 0, lambda p: (t0, t1)),
+         lambda p: (t0, t1), None),
+        ("timing", retimings, lambda c, L, p: [retimed(c, p) - L, L], 2, 2, lambda p: (t0, t1), None),
+        ("load_power", [{}], lambda c, L, p: [L ** 2 / peak(L), L], 2, 0, lambda p: (t0, t1), None),
     ]
 
 
@@ -207,40 +246,54 @@ def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[np.ndarra
     return np.array(gains), coefs
 
 
-def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=None,
-           one_channel_only: tuple = ()) -> list[Shape]:
-    """The best candidate of each kind on ``residuals`` (best channel variant), restricted to
-    ``kinds`` if given; kinds in ``one_channel_only`` may use one channel only."""
-    t, loads = modelled_loads(problem, params)
-    n = problem.y.size
-    n_ch = len(problem.channels)
+def _scan(problem: Problem, residuals: list, loads: list, kind: str, candidates: list, make, width: int,
+          scanned: int, interval_of, one_channel: bool, tries: int) -> Shape:
+    """The best of ``candidates`` of one kind (and the best channel variant); ``tries`` is the
+    number of candidates looked at in all, for the look-elsewhere allowance."""
+    n, n_ch = problem.y.size, len(problem.channels)
     variants = [tuple(True for _ in range(n_ch))]
     if n_ch == 2:
         variants += [(True, False), (False, True)]
+    blocks = [problem.band.smooth_model(np.vstack([col for cand in candidates for col in make(c, L, cand)])).T
+              for c, L in enumerate(loads)]
+    fixed = kind in FIXED_FIRST
+    gains, coefs = _gains(problem, residuals, blocks, width, fixed)
+    best = None
+    for used in variants:
+        if (one_channel and sum(used) != 1) or (fixed and not all(used)):
+            continue
+        k = (width - fixed) * sum(used) + scanned
+        look_elsewhere = 2 * math.log(tries)  # the best of many tries: its expected noise gain
+        total = sum(gains[c] for c in range(n_ch) if used[c]) - k * math.log(n) - look_elsewhere
+        j = int(np.argmax(total))
+        if best is None or total[j] > best[0]:
+            best = (float(total[j]), j, used, k)
+    gain, j, used, k = best
+    return Shape(kind, dict(candidates[j]), used,
+                 tuple(blk[:, j * width:(j + 1) * width] for blk in blocks),
+                 tuple(coefs[c][j] if used[c] else np.zeros(width) for c in range(n_ch)),
+                 tuple(float(gains[c][j]) if used[c] else 0.0 for c in range(n_ch)),
+                 gain, interval_of(candidates[j]), k, scanned)
+
+
+def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=None,
+           one_channel_only: tuple = ()) -> list[Shape]:
+    """The best candidate of each kind on ``residuals`` (best channel variant), restricted to
+    ``kinds`` if given; kinds in ``one_channel_only`` may use one channel only. A kind with a
+    local refinement (the layer's thickness and depth) is scanned again around its best."""
+    _, loads = modelled_loads(problem, params)
     out = []
-    for kind, candidates, make, width, scanned, interval_of in _candidates(problem, params):
+    for kind, candidates, make, width, scanned, interval_of, refine in _candidates(problem, params):
         if (kinds is not None and kind not in kinds) or not candidates:
             continue
-        blocks = [problem.band.smooth_model(np.vstack([col for cand in candidates for col in make(c, L, cand)])).T
-                  for c, L in enumerate(loads)]
-        fixed = kind in FIXED_FIRST
-        gains, coefs = _gains(problem, residuals, blocks, width, fixed)
-        best = None
-        for used in variants:
-            if (kind in one_channel_only and sum(used) != 1) or (fixed and not all(used)):
-                continue
-            k = (width - fixed) * sum(used) + scanned
-            look_elsewhere = 2 * math.log(len(candidates))  # the best of many tries: its expected noise gain
-            total = sum(gains[c] for c in range(n_ch) if used[c]) - k * math.log(n) - look_elsewhere
-            j = int(np.argmax(total))
-            if best is None or total[j] > best[0]:
-                best = (float(total[j]), j, used, k)
-        gain, j, used, k = best
-        out.append(Shape(kind, dict(candidates[j]), used,
-                         tuple(blk[:, j * width:(j + 1) * width] for blk in blocks),
-                         tuple(coefs[c][j] if used[c] else np.zeros(width) for c in range(n_ch)),
-                         tuple(float(gains[c][j]) if used[c] else 0.0 for c in range(n_ch)),
-                         gain, interval_of(candidates[j]), k, scanned))
+        scan = lambda cands, tries: _scan(problem, residuals, loads, kind, cands, make, width, scanned,
+                                          interval_of, kind in one_channel_only, tries)
+        best = scan(candidates, len(candidates))
+        local = refine(best.parameters) if refine else []
+        if local:
+            finer = scan(local, len(candidates) + len(local))
+            best = finer if finer.gain > best.gain else best
+        out.append(best)
     return out
 
 
@@ -268,13 +321,14 @@ COMPETING = ("step", "bump", "timing", "load_power", "oscillation")
 FIXED_FIRST = ("timing",)
 
 
-def best_competitor(problem: Problem, params: dict, residual: np.ndarray) -> Shape | None:
-    """The material shape that best explains ``residual`` among those no mechanism produces
-    (see the module; an oscillation competes only when one channel carries it)."""
+def competitors(problem: Problem, params: dict, residual: np.ndarray) -> list[Shape]:
+    """The material shapes, one per kind, that may explain ``residual`` among those no mechanism
+    produces (see the module; an oscillation competes only when one channel carries it),
+    largest gain first."""
     one = ("oscillation",) if problem.has_torque else ()
     kinds = COMPETING if problem.has_torque else tuple(k for k in COMPETING if k != "oscillation")
     found = [s for s in shapes(problem, params, [r for r in residual], kinds, one) if material(s)]
-    return max(found, key=lambda s: s.gain) if found else None
+    return sorted(found, key=lambda s: -s.gain)
 
 
 def spindle_line(time_s: np.ndarray, thrust_N: np.ndarray, model_thrust: np.ndarray, spindle_rpm: float,

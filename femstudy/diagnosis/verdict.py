@@ -2,14 +2,18 @@
 
 1. The selection (:mod:`.select`) names a subset S of the catalogue.
 2. **Replacement test**: mechanisms M ⊆ S are not named when a single shape that no catalogue
-   mechanism produces (:func:`.openworld.best_competitor`: a step, a bump, a timing error, a
+   mechanism produces (:func:`.openworld.competitors`: a step, a bump, a timing error, a
    load-power excess, a one-channel change or oscillation) explains the data clearly better in
    their place: BIC(S − M + shape) < BIC(S) − ``MIN_DELTA_BIC``, with the selection's misfit
    inflation (mechanisms, the physics expected a priori, keep the benefit of the doubt). The
-   shape is found on the residual of S − M, then S − M is refitted with the shape's columns
-   (alignment, tares and the remaining mechanisms follow it); the largest BIC gain wins,
-   repeated until nothing is replaced. This is what keeps a chip breaking off
-   from being named softening, or a thrust-only vibration feed pulsation.
+   best shape of each kind is found on the residual of S − M, then S − M is refitted with its
+   columns (alignment, tares and the remaining mechanisms follow it); the largest BIC gain
+   wins, provided M is not still needed beside the shape (BIC(S + shape) is not lower than
+   BIC(S − M + shape) by ``MIN_DELTA_BIC``: a step late in the cut must not stand in for a drift
+   seen before contact); repeated until nothing is replaced. Every kind is refitted, not only the one with the
+   largest gain on the residual: the refit can reverse their order (a harder layer's bump
+   against a one-channel oscillation). This is what keeps a chip breaking off from being named
+   softening, a thrust-only vibration feed pulsation, or a harder layer clogging.
 3. **Unexplained**: the residual of the named model is characterised (:func:`.openworld.characterise`).
 4. **Confidence** of a named mechanism: its posterior inclusion probability (BIC weights)
    times the share of the mismatch the final model explains, 1 − excess(final)/excess(baseline)
@@ -74,22 +78,23 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
     Every proper part S' of the named subset S is tried with the best competing shape on the
     residual of S' (one shape may stand in for several mechanisms that together mimic it)."""
     dropped = {}
+    bic = lambda fit, shape: _bic(problem, fit.chi2, fit.n_params + shape.scanned, inflation)
     while subset:
         full = _bic(problem, fits[subset].chi2, fits[subset].n_params, inflation)
-        best = None
+        better = []
         for size in range(len(subset)):
             for kept in itertools.combinations(sorted(subset), size):
                 smaller = fits[frozenset(kept)]
-                shape = openworld.best_competitor(problem, smaller.params, problem.y - smaller.model)
-                if shape is None:
-                    continue
-                refit = _with_shape(problem, smaller, shape)
-                delta = full - _bic(problem, refit.chi2, refit.n_params + shape.scanned, inflation)
-                if delta >= MIN_DELTA_BIC and (best is None or delta > best[0]):
-                    best = (delta, frozenset(kept), shape)
+                for shape in openworld.competitors(problem, smaller.params, problem.y - smaller.model):
+                    replaced = bic(_with_shape(problem, smaller, shape), shape)
+                    if full - replaced >= MIN_DELTA_BIC:
+                        better.append((full - replaced, replaced, frozenset(kept), shape))
+        # the largest gain whose dropped mechanisms are not still needed beside the shape
+        best = next((b for b in sorted(better, key=lambda b: -b[0])
+                     if b[1] - bic(_with_shape(problem, fits[subset], b[3]), b[3]) < MIN_DELTA_BIC), None)
         if best is None:
             break
-        delta, kept, shape = best
+        delta, _, kept, shape = best
         kind, channel, _ = openworld.describe(problem, shape)
         for m in subset - kept:
             dropped[m] = (f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its place "
