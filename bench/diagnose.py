@@ -23,6 +23,7 @@ on a shared machine.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import sys
 import time
@@ -63,7 +64,7 @@ def run_case(kind: str, seed: int, torque: bool, model: bool, duration_s: float 
         sim, cortex, _ = inputs.model_simulation(rec, case.simulation_model, BONE, None)
     else:
         sim, cortex = TraceSimulation.from_recording(case.simulation, rec.spindle_rpm), rec.metadata["cortex_mm"]
-    d = diagnose(rec, sim, float(cortex), BONE)
+    d = diagnose(rec, sim, float(cortex), BONE, workers=os.cpu_count() or 1)
     return case, d, time.perf_counter() - start
 
 

@@ -116,3 +116,15 @@ def test_json_contract_names_and_types():
     assert js["fit"]["improved"]["r2_heldout"] > js["fit"]["baseline"]["r2_heldout"]
     for u in js["unexplained"]:
         assert set(u) >= {"start_s", "end_s", "channel", "description"} and u["start_s"] <= u["end_s"]
+
+
+def test_two_workers_give_the_same_diagnosis():
+    """The process pool (femstudy.diagnosis.workers) runs the same fits: the same answer."""
+    case, serial = diagnosed("pulse_feed_clogging_softening", 7)
+    rec = case.recording
+    pooled = diagnose(rec, TraceSimulation.from_recording(case.simulation, rec.spindle_rpm),
+                      float(rec.metadata["cortex_mm"]), workers=2)
+    a, b = serial.to_json(), pooled.to_json()
+    for js in (a, b):
+        js.pop("seconds")
+    assert a == b

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 from femstudy.commands.metadata import add_metadata_options, parse_settings
@@ -36,6 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write report.md, overlay.png, residuals.png and diagnosis.json to DIR")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the overlay and residual figure")
+    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                   help="processes for the independent fits (default: every core; the result is the same)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
 
@@ -46,9 +49,10 @@ def run(args: argparse.Namespace) -> int:
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
     require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
+    require(args.workers >= 1, f"--workers must be at least 1, got {args.workers}")
     d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
                  columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
-                 bone_library=args.settings.bones_dir)
+                 bone_library=args.settings.bones_dir, workers=args.workers)
     print(d.summary())
     for path in d.write(args.json, args.plot, args.report):
         print(f"wrote {path}")

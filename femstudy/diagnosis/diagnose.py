@@ -32,12 +32,13 @@ import numpy as np
 
 from femstudy.diagnosis import explain, heldout, inputs, openworld
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
-from femstudy.diagnosis.fit import Fit, fit_all, seeds
+from femstudy.diagnosis.fit import Fit, fit_all, fit_each, seeds
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.mechanisms import Problem
 from femstudy.diagnosis.prepare import align, build_problem, cut_window, restate, with_noise
 from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection, select
 from femstudy.diagnosis.verdict import Verdict, decide
+from femstudy.diagnosis.workers import fitter
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
 from femstudy.recordings.reader import Recording, read_recording
@@ -157,14 +158,14 @@ class Diagnosis:
         }
 
 
-def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> dict:
+def summarise_fit(problem: Problem, baseline: Fit, improved: Fit, fits_of=fit_each) -> dict:
     """R² and RMSE of the smoothed recording over the cutting phase, per channel: in-sample
     (``r2``) and held out (``r2_heldout``, blocked folds, :mod:`.heldout`)."""
     window = cut_window(problem, baseline)
     if np.count_nonzero(window) < 3:
         window = np.ones_like(window)
-    predictions = {"baseline": heldout.held_out_predictions(problem, baseline, window),
-                   "improved": heldout.held_out_predictions(problem, improved, window)}
+    predictions = {label: heldout.held_out_predictions(problem, fit, window, fits_of)
+                   for label, fit in (("baseline", baseline), ("improved", improved))}
     out = {}
     t = problem.band.t_dec[window]
     for c, name in enumerate(problem.channels):
@@ -179,10 +180,10 @@ def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> dict:
     return out
 
 
-def fit_and_select(problem: Problem, start_params: dict) -> tuple[dict, Selection]:
+def fit_and_select(problem: Problem, start_params: dict, fits_of=fit_each) -> tuple[dict, Selection]:
     """Every subset fitted from the seeds and the aligned parameters, then selected."""
-    fits = fit_all(problem, start_params, seeds(problem, start_params))
-    return fits, select(problem, fits)
+    fits = fit_all(problem, start_params, seeds(problem, start_params), fits_of)
+    return fits, select(problem, fits, fits_of)
 
 
 #: Least scale error (fraction) for which the calibrated family is fitted.
@@ -254,7 +255,7 @@ def _timing(problem: Problem, baseline: Fit, cortex_mm: float) -> dict:
 def diagnose(recording, simulation=None, cortex_mm: float | None = None,
              bone: str | BoneSet = "bovine", progress=None, *, model: str | None = None,
              columns=None, overrides: dict | None = None, override_header: bool = False,
-             bone_library: Path | None = None) -> Diagnosis:
+             bone_library: Path | None = None, workers: int = 1) -> Diagnosis:
     """Diagnose ``recording`` against a simulation (see the module docstring).
 
     Parameters
@@ -272,6 +273,7 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
     progress : optional callable taking one message per step (they also go to the logger).
     model : "allotta" or "clogging": diagnose against that femstudy load model instead, started
         at the recording's detected contact.
+    workers : processes for the independent fits (:mod:`.workers`); the result is the same.
 
     Returns
     -------
@@ -311,32 +313,34 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
                            chi2_of=lambda lo, hi, c=c: openworld.interval_chi2(problem, c, residual[c], lo, hi))),
                       key=lambda i: (i["start_s"], i["channel"]))
     say(f"aligned (shift {baseline.params['shift_s'] * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s)")
-    start_params = {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())}
-    fits, selection = fit_and_select(problem, start_params)
-    say(f"fitted {len(fits)} mechanism subsets")
-    if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
-                                                        for f in (fits[selection.subset], baseline)):
-        scaled = replace(problem, calibrate=True)
-        scaled_fits, scaled_selection = fit_and_select(scaled, start_params)
-        if (plain_bic(scaled, scaled_fits[scaled_selection.subset])
-                < plain_bic(problem, fits[selection.subset]) - MIN_DELTA_BIC):
-            problem, fits, selection = scaled, scaled_fits, scaled_selection
-        say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
-    verdict = decide(problem, fits, selection, baseline)
-    improved = verdict.fit
-    span = openworld.cut_span(problem, improved.params)
-    model_thrust = problem.predict(improved.params, recording.time_s)["thrust_N"]
-    spindle = openworld.spindle_line(recording.time_s, recording.thrust_N, model_thrust, recording.spindle_rpm,
-                                     (span[0] + problem.geometry.cone_mm / problem.geometry.feed_mm_s, span[1]))
-    leftover = problem.y - improved.model
-    for s in verdict.shapes:
-        leftover = leftover - s.contribution()
-    peaks = np.array([max(float(np.max(np.abs(L))), 1e-12) for L in openworld.modelled_loads(problem, improved.params)[1]])
-    unexplained = openworld.report(problem, list(verdict.shapes), leftover, spindle, span, peaks)
-    say(f"named {len(verdict.subset)} mechanism(s), {len(unexplained)} unexplained feature(s)")
-    bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
-    mechanisms = explain.mechanisms(problem, improved, selection, verdict, bone_mu_w)
-    summary = summarise_fit(problem, baseline, improved)
+    with fitter(workers) as fits_of:
+        start_params = {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())}
+        fits, selection = fit_and_select(problem, start_params, fits_of)
+        say(f"fitted {len(fits)} mechanism subsets")
+        if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
+                                                            for f in (fits[selection.subset], baseline)):
+            scaled = replace(problem, calibrate=True)
+            scaled_fits, scaled_selection = fit_and_select(scaled, start_params, fits_of)
+            if (plain_bic(scaled, scaled_fits[scaled_selection.subset])
+                    < plain_bic(problem, fits[selection.subset]) - MIN_DELTA_BIC):
+                problem, fits, selection = scaled, scaled_fits, scaled_selection
+            say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
+        verdict = decide(problem, fits, selection, baseline, fits_of)
+        improved = verdict.fit
+        span = openworld.cut_span(problem, improved.params)
+        model_thrust = problem.predict(improved.params, recording.time_s)["thrust_N"]
+        spindle = openworld.spindle_line(recording.time_s, recording.thrust_N, model_thrust, recording.spindle_rpm,
+                                         (span[0] + problem.geometry.cone_mm / problem.geometry.feed_mm_s, span[1]))
+        leftover = problem.y - improved.model
+        for s in verdict.shapes:
+            leftover = leftover - s.contribution()
+        _, loads = openworld.modelled_loads(problem, improved.params)
+        peaks = np.array([max(float(np.max(np.abs(L))), 1e-12) for L in loads])
+        unexplained = openworld.report(problem, list(verdict.shapes), leftover, spindle, span, peaks)
+        say(f"named {len(verdict.subset)} mechanism(s), {len(unexplained)} unexplained feature(s)")
+        bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
+        mechanisms = explain.mechanisms(problem, improved, selection, verdict, bone_mu_w)
+        summary = summarise_fit(problem, baseline, improved, fits_of)
     seconds = time.perf_counter() - start
     say(f"diagnosed in {seconds:.2f} s")
     return Diagnosis(recording, problem, baseline, fits, selection, verdict, mismatch, mechanisms, unexplained,

@@ -33,6 +33,8 @@ FREQUENCY_STARTS = 3
 PULSE_GATE = 2.0
 #: BIC gain beyond its parameter's cost that the pulse shape must bring.
 MIN_PULSE_GAIN = 10.0
+#: Multiple of the best subset's gain from a pulsation variant within which the others are refitted.
+REACH = 2.0
 
 
 @dataclass
@@ -115,6 +117,13 @@ def fit_subset(problem: Problem, subset: frozenset, starts: list[dict], rows: np
     chi2 = np.array([float(np.sum(r ** 2)) for r in res])
     n_linear = sum(len(n) for n in problem.linear_names(subset))
     return Fit(subset, {**params, **linear}, chi2, model, len(names) + len(fixed) + n_linear, tuple(variant))
+
+
+def fit_each(requests: list) -> list[Fit]:
+    """``fit_subset(problem, subset, starts, **options)`` for each request ``(problem, subset,
+    starts, options)``, one after the other: the serial fitter (:mod:`.workers` has the
+    parallel one)."""
+    return [fit_subset(problem, subset, starts, **options) for problem, subset, starts, options in requests]
 
 
 def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list[np.ndarray]:
@@ -242,27 +251,38 @@ def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: d
     return starts
 
 
-def _variant_stage(problem: Problem, fits: dict, name: str, starts: tuple) -> None:
+def _variant_stage(problem: Problem, fits: dict, name: str, starts: tuple, fits_of=fit_each) -> None:
     """Refit the subsets with pulsation adding the optional parameter ``name``: first the best
     one, from each value in ``starts``; if it gains more than the parameter's BIC cost plus
-    ``MIN_PULSE_GAIN`` there, every other one from the value found, kept where it gains as much."""
+    ``MIN_PULSE_GAIN`` there, every other one from the value found, kept where it gains as much.
+    A subset that would stay behind the best one's refit even gaining twice as much
+    (``REACH``) is left as it is: no selection can pick it (the all-mechanism subset, whose
+    misfit scales the BIC, is always refitted)."""
     factor = problem.n_eff_factor
     cost = math.log(problem.y.size * factor) + MIN_PULSE_GAIN
     pulsed = sorted((s for s in fits if "feed_pulsation" in s), key=lambda s: fits[s].chi2_total)
+    full = max(fits, key=len)
+    best = None
     for subset in pulsed:
         plain = fits[subset]
+        if best is not None and subset != full and (
+                (plain.chi2_total - best[0]) * factor > REACH * best[1] + cost):
+            continue
         variant = plain.variant + (name,)
-        refit = fit_subset(problem, subset, [{**plain.params, name: v} for v in starts], variant=variant)
+        refit, = fits_of([(problem, subset, [{**plain.params, name: v} for v in starts], {"variant": variant})])
         if (plain.chi2_total - refit.chi2_total) * factor <= cost:
             if subset == pulsed[0]:
                 return  # no gain where pulsation fits best: the plain form stays everywhere
             continue
         fits[subset] = refit
         starts = (refit.params[name],)
+        if best is None:
+            best = (refit.chi2_total, (plain.chi2_total - refit.chi2_total) * factor)
 
 
-def fit_all(problem: Problem, base_params: dict, seed: dict) -> dict:
-    """Fits of every subset of mechanisms (in order of size, each seeding the larger ones).
+def fit_all(problem: Problem, base_params: dict, seed: dict, fits_of=fit_each) -> dict:
+    """Fits of every subset of mechanisms (in order of size, each seeding the larger ones; the
+    subsets of one size by ``fits_of``, :mod:`.workers`).
 
     When even the fit with all mechanisms leaves clearly more than noise (χ²/dof above
     ``PULSE_GATE``), the pulsation's optional forms are tried (:func:`_variant_stage`): the
@@ -271,11 +291,13 @@ def fit_all(problem: Problem, base_params: dict, seed: dict) -> dict:
     allowed = [m for m in MECHANISMS if m != "chip_clogging" or problem.clogging_possible]
     subsets = [frozenset(m for k, m in enumerate(allowed) if mask >> k & 1) for mask in range(1 << len(allowed))]
     fits: dict = {}
-    for subset in sorted(subsets, key=len):
-        fits[subset] = fit_subset(problem, subset, starting_points(subset, base_params, seed, fits))
+    for size in range(len(allowed) + 1):
+        level = [s for s in subsets if len(s) == size]
+        requests = [(problem, s, starting_points(s, base_params, seed, fits), {}) for s in level]
+        fits.update(zip(level, fits_of(requests)))
     full = fits[max(fits, key=len)]
     factor = problem.n_eff_factor
     if full.chi2_total * factor / max(problem.y.size * factor - full.n_params, 1.0) > PULSE_GATE:
-        _variant_stage(problem, fits, "pulsation_sharpness", (1.5, 4.0))
-        _variant_stage(problem, fits, "pulsation_sweep", (-0.2, 0.2))
+        _variant_stage(problem, fits, "pulsation_sharpness", (1.5, 4.0), fits_of)
+        _variant_stage(problem, fits, "pulsation_sweep", (-0.2, 0.2), fits_of)
     return fits

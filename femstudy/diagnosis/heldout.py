@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from femstudy.diagnosis.fit import Fit, fit_subset
+from femstudy.diagnosis.fit import Fit, fit_each
 from femstudy.diagnosis.mechanisms import Problem
 
 BLOCKS = 4
@@ -27,7 +27,7 @@ def block_masks(window: np.ndarray, blocks: int = BLOCKS) -> list[np.ndarray]:
     return [np.isin(np.arange(window.size), part) for part in np.array_split(idx, blocks) if part.size]
 
 
-def held_out_predictions(problem: Problem, fit: Fit, window: np.ndarray) -> np.ndarray:
+def held_out_predictions(problem: Problem, fit: Fit, window: np.ndarray, fits_of=fit_each) -> np.ndarray:
     """The smoothed model at the window's instants, each block predicted from a fit without it.
 
     Parameters
@@ -35,6 +35,7 @@ def held_out_predictions(problem: Problem, fit: Fit, window: np.ndarray) -> np.n
     problem : the diagnosis problem (its noise model weights the refits).
     fit : the fit whose subset and parameters start each refit.
     window : boolean mask of the instants predicted (the cut).
+    fits_of : the fitter of the refits (:mod:`.workers`).
 
     Returns
     -------
@@ -49,8 +50,10 @@ def held_out_predictions(problem: Problem, fit: Fit, window: np.ndarray) -> np.n
     alignment = {n: fit.params[n] for n in problem.held_out_fixed_names(fit.subset)}
     start = {n: fit.params[n] for n in names}
     out = fit.model.copy()
-    for block in block_masks(window):
-        refit = fit_subset(problem, fit.subset, [start], rows=~block, variant=fit.variant, fixed=alignment)
+    blocks = block_masks(window)
+    refits = fits_of([(problem, fit.subset, [start], {"rows": ~b, "variant": fit.variant, "fixed": alignment})
+                      for b in blocks])
+    for block, refit in zip(blocks, refits):
         out[:, block] = refit.model[:, block]
     return out
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from femstudy.diagnosis.fit import Fit, fit_subset
+from femstudy.diagnosis.fit import Fit, fit_each
 from femstudy.diagnosis.mechanisms import Problem
 
 MIN_DELTA_BIC = 10.0
@@ -110,24 +110,28 @@ def folds(problem: Problem) -> list[np.ndarray]:
     return [block == k for k in range(FOLDS)]
 
 
-def held_out_chi2(problem: Problem, fit: Fit, inflation: np.ndarray) -> float:
+def held_out_chi2(problem: Problem, fits: list[Fit], inflation: np.ndarray, fits_of=fit_each) -> list[float]:
     """Σ over folds of the χ² of held-out segments, each predicted by a fit on the others. The
     alignment (shift, stop depth) and clogging's retained fraction stay at the full fit's values
     (:meth:`~.mechanisms.Problem.held_out_fixed_names`): each is pinned by a few instants that a
-    fold may hold out, and they are not what is being tested."""
-    names = problem.nonlinear_names(fit.subset, fit.variant)
-    start = {n: fit.params[n] for n in names}
-    alignment = {n: fit.params[n] for n in problem.held_out_fixed_names(fit.subset)}
-    total = 0.0
-    for held in folds(problem):
-        f = fit_subset(problem, fit.subset, [start], rows=~held, variant=fit.variant, fixed=alignment)
-        total += float(sum(np.sum(problem.whiten(c, problem.y[c] - f.model[c], held) ** 2) / k
-                           for c, k in enumerate(inflation)))
-    return total
+    fold may hold out, and they are not what is being tested. One value per fit of ``fits``."""
+    held = folds(problem)
+    requests = []
+    for fit in fits:
+        names = problem.nonlinear_names(fit.subset, fit.variant)
+        options = {"variant": fit.variant,
+                   "fixed": {n: fit.params[n] for n in problem.held_out_fixed_names(fit.subset)}}
+        requests += [(problem, fit.subset, [{n: fit.params[n] for n in names}], {**options, "rows": ~h})
+                     for h in held]
+    refits = fits_of(requests)
+    chi2 = [float(sum(np.sum(problem.whiten(c, problem.y[c] - f.model[c], h) ** 2) / k for c, k in enumerate(inflation)))
+            for f, h in zip(refits, held * len(fits))]
+    return [sum(chi2[i * len(held):(i + 1) * len(held)]) for i in range(len(fits))]
 
 
-def select(problem: Problem, fits: dict) -> Selection:
-    """The selected subset, with the evidence (see the module docstring)."""
+def select(problem: Problem, fits: dict, fits_of=fit_each) -> Selection:
+    """The selected subset, with the evidence (see the module docstring); refits by
+    ``fits_of`` (:mod:`.workers`)."""
     bic, inflation = bic_table(problem, fits)
     best = min(bic, key=bic.get)
     weights = {s: math.exp(-(b - bic[best]) / 2) for s, b in bic.items()}
@@ -139,11 +143,12 @@ def select(problem: Problem, fits: dict) -> Selection:
     subset = best
     n_eff = problem.y.size * problem.n_eff_factor
     while subset:
-        for m in subset:  # each smaller fit also from the larger optimum: fits are multimodal
-            smaller = subset - {m}
-            names = problem.nonlinear_names(smaller, fits[subset].variant)
-            polished = fit_subset(problem, smaller, [{n: fits[subset].params[n] for n in names}],
-                                  variant=fits[subset].variant if "feed_pulsation" in smaller else ())
+        # each smaller fit also from the larger optimum: fits are multimodal
+        smallers = [subset - {m} for m in subset]
+        variant = fits[subset].variant
+        polishes = fits_of([(problem, s, [{n: fits[subset].params[n] for n in problem.nonlinear_names(s, variant)}],
+                                      {"variant": variant if "feed_pulsation" in s else ()}) for s in smallers])
+        for smaller, polished in zip(smallers, polishes):
             if polished.chi2_total < fits[smaller].chi2_total:
                 fits[smaller] = polished
                 bic[smaller] = (float(np.sum(polished.chi2 / inflation)) * problem.n_eff_factor
@@ -157,9 +162,8 @@ def select(problem: Problem, fits: dict) -> Selection:
             elif sizes[m] < THRESHOLDS[m]:
                 reasons[m] = (delta, f"size {sizes[m]:.3g} below {THRESHOLDS[m]:g}")
         if not reasons:
-            for s in [subset] + [subset - {m} for m in subset]:
-                if s not in held_out:
-                    held_out[s] = held_out_chi2(problem, fits[s], inflation)
+            missing = [s for s in [subset] + [subset - {m} for m in subset] if s not in held_out]
+            held_out.update(zip(missing, held_out_chi2(problem, [fits[s] for s in missing], inflation, fits_of)))
             for m in subset:
                 if held_out[subset - {m}] <= held_out[subset]:
                     reasons[m] = (held_out[subset - {m}] - held_out[subset],

@@ -32,7 +32,7 @@ import numpy as np
 from scipy import stats
 
 from femstudy.diagnosis import openworld
-from femstudy.diagnosis.fit import Fit, fit_subset
+from femstudy.diagnosis.fit import Fit, fit_each
 from femstudy.diagnosis.mechanisms import Problem
 from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection
 
@@ -73,7 +73,8 @@ def _bic(problem: Problem, chi2: np.ndarray, n_params: int, inflation: np.ndarra
     return float(np.sum(chi2 / inflation)) * problem.n_eff_factor + n_params * math.log(n_eff)
 
 
-def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation: np.ndarray) -> tuple[frozenset, dict]:
+def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation: np.ndarray,
+                      fits_of=fit_each) -> tuple[frozenset, dict]:
     """Step 2 of the module: the subset left once a shape has replaced what it explains better.
     Every proper part S' of the named subset S is tried with the best competing shape on the
     residual of S' (one shape may stand in for several mechanisms that together mimic it)."""
@@ -81,17 +82,17 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
     bic = lambda fit, shape: _bic(problem, fit.chi2, fit.n_params + shape.scanned, inflation)
     while subset:
         full = _bic(problem, fits[subset].chi2, fits[subset].n_params, inflation)
-        better = []
-        for size in range(len(subset)):
-            for kept in itertools.combinations(sorted(subset), size):
-                smaller = fits[frozenset(kept)]
-                for shape in openworld.competitors(problem, smaller.params, problem.y - smaller.model):
-                    replaced = bic(_with_shape(problem, smaller, shape), shape)
-                    if full - replaced >= MIN_DELTA_BIC:
-                        better.append((full - replaced, replaced, frozenset(kept), shape))
+        tried = [(frozenset(kept), shape) for size in range(len(subset))
+                 for kept in itertools.combinations(sorted(subset), size)
+                 for shape in openworld.competitors(problem, fits[frozenset(kept)].params,
+                                                    problem.y - fits[frozenset(kept)].model)]
+        refits = _with_shapes(problem, [(fits[kept], shape) for kept, shape in tried], fits_of)
+        better = [(full - bic(refit, shape), bic(refit, shape), kept, shape)
+                  for (kept, shape), refit in zip(tried, refits) if full - bic(refit, shape) >= MIN_DELTA_BIC]
+        better.sort(key=lambda b: -b[0])
         # the largest gain whose dropped mechanisms are not still needed beside the shape
-        best = next((b for b in sorted(better, key=lambda b: -b[0])
-                     if b[1] - bic(_with_shape(problem, fits[subset], b[3]), b[3]) < MIN_DELTA_BIC), None)
+        beside = _with_shapes(problem, [(fits[subset], b[3]) for b in better], fits_of)
+        best = next((b for b, f in zip(better, beside) if b[1] - bic(f, b[3]) < MIN_DELTA_BIC), None)
         if best is None:
             break
         delta, _, kept, shape = best
@@ -103,17 +104,17 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
     return subset, dropped
 
 
-def _with_shape(problem: Problem, fit: Fit, shape) -> Fit:
-    """``fit``'s subset refitted with the shape's columns added (its scanned parameters held),
-    so that the alignment and the tares can follow the shape."""
-    names = problem.nonlinear_names(fit.subset, fit.variant)
-    return fit_subset(replace(problem, extra=shape.free_columns()), fit.subset,
-                      [{n: fit.params[n] for n in names}], variant=fit.variant)
+def _with_shapes(problem: Problem, pairs: list, fits_of=fit_each) -> list[Fit]:
+    """Each (fit, shape): the fit's subset refitted with the shape's columns added (its scanned
+    parameters held), so that the alignment and the tares can follow the shape."""
+    return fits_of([(replace(problem, extra=shape.free_columns()), fit.subset,
+                     [{n: fit.params[n] for n in problem.nonlinear_names(fit.subset, fit.variant)}],
+                     {"variant": fit.variant}) for fit, shape in pairs])
 
 
-def decide(problem: Problem, fits: dict, selection: Selection, baseline: Fit) -> Verdict:
-    """Steps 2–4 of the module."""
-    subset, dropped = replace_by_shapes(problem, fits, selection.subset, selection.inflation)
+def decide(problem: Problem, fits: dict, selection: Selection, baseline: Fit, fits_of=fit_each) -> Verdict:
+    """Steps 2–4 of the module (refits by ``fits_of``, :mod:`.workers`)."""
+    subset, dropped = replace_by_shapes(problem, fits, selection.subset, selection.inflation, fits_of)
     fit = fits[subset]
     found = openworld.characterise(problem, fit.params, problem.y - fit.model)
     chi2_dof, p_value = residual_test(problem, fit)
