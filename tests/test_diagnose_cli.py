@@ -31,12 +31,17 @@ def files(tmp_path_factory):
     return folder
 
 
-def test_pulsation_and_clogging_found_against_an_allotta_trace_on_another_time_base(files, tmp_path):
+def diagnose_json(tmp_path, *args):
+    """``femstudy diagnose ARGS --json`` run to success: the process and the JSON it wrote."""
     out = tmp_path / "d.json"
-    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(files / "allotta.csv"),
-                   "--json", str(out), "--plot", str(tmp_path / "d.png"), "--report", str(tmp_path / "report"))
+    proc = run_cli("diagnose", *map(str, args), "--json", str(out))
     assert proc.returncode == 0, proc.stderr
-    js = json.loads(out.read_text())
+    return proc, json.loads(out.read_text())
+
+
+def test_pulsation_and_clogging_found_against_an_allotta_trace_on_another_time_base(files, tmp_path):
+    proc, js = diagnose_json(tmp_path, files / "rec.csv", "--simulation", files / "allotta.csv",
+                             "--plot", tmp_path / "d.png", "--report", tmp_path / "report")
     assert sorted(m["mechanism"] for m in js["missing_physics"]) == ["chip_clogging", "feed_pulsation"]
     assert js["fit"]["improved"]["r2"] > 0.999 > js["fit"]["baseline"]["r2"]
     assert {m["channel"] for m in js["mismatch"]} == {"thrust_N", "torque_Nmm"}
@@ -52,11 +57,7 @@ def test_pulsation_and_clogging_found_against_an_allotta_trace_on_another_time_b
 
 
 def test_complete_simulation_reports_nothing(files, tmp_path):
-    out = tmp_path / "d.json"
-    proc = run_cli("diagnose", str(files / "quiet.csv"), "--simulation", str(files / "clogging.csv"),
-                   "--json", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    js = json.loads(out.read_text())
+    proc, js = diagnose_json(tmp_path, files / "quiet.csv", "--simulation", files / "clogging.csv", "--quiet")
     assert js["missing_physics"] == [] and js["mismatch"] == []
     assert "missing physics: none" in proc.stdout and proc.stderr == ""
 
@@ -100,11 +101,7 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(files, tmp_path, args, 
 def test_no_torque_in_the_recording_diagnoses_thrust_alone(files, tmp_path):
     rec = synthesize(1.5, 1500, mu_f=0.07, effects=Effects(**NUISANCE, pulsation=None), seed=8)
     write_recording(tmp_path / "thrust_only.csv", replace(rec, torque_Nmm=None))
-    out = tmp_path / "d.json"
-    proc = run_cli("diagnose", str(tmp_path / "thrust_only.csv"), "--simulation", str(files / "allotta.csv"),
-                   "--json", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    js = json.loads(out.read_text())
+    _, js = diagnose_json(tmp_path, tmp_path / "thrust_only.csv", "--simulation", files / "allotta.csv", "--quiet")
     assert [m["mechanism"] for m in js["missing_physics"]] == ["chip_clogging"]
     assert set(js["fit"]["channels"]) == {"thrust_N"} and set(js["noise"]) == {"thrust_N"}
     assert np.isclose(js["noise"]["thrust_N"], 0.3, rtol=0.05)
@@ -117,10 +114,7 @@ def test_load_model_path_finds_softening_and_is_silent_when_complete(tmp_path):
                                                  pulsation=None), seed=10, approach_s=1.5)
     for name, rec, expected in (("quiet", quiet, []), ("soft", soft, ["thermal_softening"])):
         write_recording(tmp_path / f"{name}.csv", rec)
-        out = tmp_path / f"{name}.json"
-        proc = run_cli("diagnose", str(tmp_path / f"{name}.csv"), "--model", "clogging", "--json", str(out), "--quiet")
-        assert proc.returncode == 0, proc.stderr
-        js = json.loads(out.read_text())
+        proc, js = diagnose_json(tmp_path, tmp_path / f"{name}.csv", "--model", "clogging", "--quiet")
         assert [m["mechanism"] for m in js["missing_physics"]] == expected, js["selection"]
         assert "load model 'clogging'" in proc.stdout
     p = js["missing_physics"][0]["parameters"]
@@ -131,12 +125,8 @@ def test_simulation_without_a_header_takes_feed_and_speed_from_the_recording(fil
     """An FE trace as plain columns (no '#' metadata lines)."""
     lines = (files / "allotta.csv").read_text().splitlines()
     (tmp_path / "bare.csv").write_text("\n".join(line for line in lines if not line.startswith("#")) + "\n")
-    out = tmp_path / "d.json"
-    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(tmp_path / "bare.csv"),
-                   "--json", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    assert sorted(m["mechanism"] for m in json.loads(out.read_text())["missing_physics"]) == \
-        ["chip_clogging", "feed_pulsation"]
+    _, js = diagnose_json(tmp_path, files / "rec.csv", "--simulation", tmp_path / "bare.csv", "--quiet")
+    assert sorted(m["mechanism"] for m in js["missing_physics"]) == ["chip_clogging", "feed_pulsation"]
 
 
 def test_simulation_on_its_own_clock_is_placed_by_correlation(files, tmp_path):
@@ -145,11 +135,7 @@ def test_simulation_on_its_own_clock_is_placed_by_correlation(files, tmp_path):
 
     sim = read_recording(files / "allotta.csv")
     write_recording(tmp_path / "from_contact.csv", replace(sim, time_s=sim.time_s - 2.0))
-    out = tmp_path / "d.json"
-    proc = run_cli("diagnose", str(files / "rec.csv"), "--simulation", str(tmp_path / "from_contact.csv"),
-                   "--json", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    js = json.loads(out.read_text())
+    _, js = diagnose_json(tmp_path, files / "rec.csv", "--simulation", tmp_path / "from_contact.csv", "--quiet")
     assert sorted(m["mechanism"] for m in js["missing_physics"]) == ["chip_clogging", "feed_pulsation"]
     (note,) = [n for n in js["notes"] if "runs on another clock" in n]
     assert float(note.split("moved by ")[1].split(" s,")[0]) == pytest.approx(2.0, abs=0.05)  # the alignment refines it
@@ -166,11 +152,7 @@ def test_a_cut_ending_by_retraction_is_diagnosed_with_the_cortex_from_the_simula
     strip = lambda r: replace(r, metadata={k: v for k, v in r.metadata.items() if k != "cortex_mm"})
     write_recording(tmp_path / "rec.csv", strip(rec))
     write_recording(tmp_path / "sim.csv", strip(sim))
-    out = tmp_path / "d.json"
-    proc = run_cli("diagnose", str(tmp_path / "rec.csv"), "--simulation", str(tmp_path / "sim.csv"),
-                   "--json", str(out), "--quiet")
-    assert proc.returncode == 0, proc.stderr
-    js = json.loads(out.read_text())
+    _, js = diagnose_json(tmp_path, tmp_path / "rec.csv", "--simulation", tmp_path / "sim.csv", "--quiet")
     assert [m["mechanism"] for m in js["missing_physics"]] == ["chip_clogging"]
     assert js["timing"]["breakthrough_s"] is None
     # the drill went 4 mm in at 1.5 mm/s from contact at 2 s

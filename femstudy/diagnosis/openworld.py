@@ -157,10 +157,9 @@ def cut_span(problem: Problem, params: dict) -> tuple[float, float]:
     return sim.contact_s + shift, min(stop + shift, end) if math.isfinite(stop) else end
 
 
-def _candidates(problem: Problem, params: dict):
+def _candidates(problem: Problem, params: dict, t: np.ndarray, loads: list[np.ndarray]):
     """(kind, candidates, make(channel, load, candidate) -> columns, width, scanned, interval,
-    refine(candidate) -> candidates around it, or None)."""
-    t, _ = modelled_loads(problem, params)
+    refine(candidate) -> candidates around it, or None), for the modelled ``loads`` at ``t``."""
     t0, t1 = cut_span(problem, params)
     in_cut = (t >= t0) & (t <= t1)
     step = problem.band.sigma_s / 2
@@ -172,26 +171,30 @@ def _candidates(problem: Problem, params: dict):
              for s in np.arange(t0, t1 - w, max(step, w / 8))]
     # ... or falls back at least halfway before the cut ends or the tip leaves the cortex
     t_layers = min(t1, t0 + problem.geometry.cortex_mm / feed)
+
+    def layer_width_and_latest_start(d):
+        w = float((d + cone) / feed)
+        return w, t_layers - w + min(d, cone) / feed / 2
+
     for d in LAYER_THICKNESS_MM:
-        w, ramp = (d + cone) / feed, min(d, cone) / feed
+        w, latest = layer_width_and_latest_start(d)
         bumps += [{"start_s": float(s), "width_s": w, "thickness_mm": d}
-                  for s in np.arange(t0, t_layers - w + ramp / 2, max(step, w / 8))]
+                  for s in np.arange(t0, latest, max(step, w / 8))]
+
     def layer_neighbours(p):
         """Layers around a scanned one: thickness ×0.8–1.25, the tip's entry ± half a start step."""
         if "thickness_mm" not in p:
             return []
         out = []
         for d in p["thickness_mm"] * np.geomspace(0.8, 1.25, 7):
-            w = float((d + cone) / feed)
+            w, latest = layer_width_and_latest_start(d)
             out += [{"start_s": float(s), "width_s": w, "thickness_mm": float(d)}
-                    for s in p["start_s"] + np.linspace(-0.5, 0.5, 5) * max(step, w / 8)
-                    if t0 <= s < t_layers - w + min(d, cone) / feed / 2]
+                    for s in p["start_s"] + np.linspace(-0.5, 0.5, 5) * max(step, w / 8) if t0 <= s < latest]
         return out
 
     cycles = [{"frequency_hz": float(f)} for f in FREQUENCIES_HZ if f * (t1 - t0) >= 1.5]
     retimings = [{"stretch": float(e), "delay_s": float(d)} for e in np.concatenate([-STRETCHES, STRETCHES])
                  for d in DELAYS_S]
-    _, loads = modelled_loads(problem, params)
 
     def retimed(c, p):
         return np.interp(t0 + (t - t0 - p["delay_s"]) * (1 + p["stretch"]), t, loads[c])
@@ -281,9 +284,9 @@ def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=No
     """The best candidate of each kind on ``residuals`` (best channel variant), restricted to
     ``kinds`` if given; kinds in ``one_channel_only`` may use one channel only. A kind with a
     local refinement (the layer's thickness and depth) is scanned again around its best."""
-    _, loads = modelled_loads(problem, params)
+    t, loads = modelled_loads(problem, params)
     out = []
-    for kind, candidates, make, width, scanned, interval_of, refine in _candidates(problem, params):
+    for kind, candidates, make, width, scanned, interval_of, refine in _candidates(problem, params, t, loads):
         if (kinds is not None and kind not in kinds) or not candidates:
             continue
         scan = lambda cands, tries: _scan(problem, residuals, loads, kind, cands, make, width, scanned,

@@ -76,8 +76,9 @@ def _bic(problem: Problem, chi2: np.ndarray, n_params: int, inflation: np.ndarra
 def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation: np.ndarray,
                       fits_of=fit_each) -> tuple[frozenset, dict]:
     """Step 2 of the module: the subset left once a shape has replaced what it explains better.
-    Every proper part S' of the named subset S is tried with the best competing shape on the
-    residual of S' (one shape may stand in for several mechanisms that together mimic it)."""
+    Every proper part S' of the named subset S is tried with the best competing shape of each
+    kind on the residual of S' (one shape may stand in for several mechanisms that together
+    mimic it)."""
     dropped = {}
     bic = lambda fit, shape: _bic(problem, fit.chi2, fit.n_params + shape.scanned, inflation)
     while subset:
@@ -87,15 +88,19 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
                  for shape in openworld.competitors(problem, fits[frozenset(kept)].params,
                                                     problem.y - fits[frozenset(kept)].model)]
         refits = _with_shapes(problem, [(fits[kept], shape) for kept, shape in tried], fits_of)
-        better = [(full - bic(refit, shape), bic(refit, shape), kept, shape)
-                  for (kept, shape), refit in zip(tried, refits) if full - bic(refit, shape) >= MIN_DELTA_BIC]
-        better.sort(key=lambda b: -b[0])
-        # the largest gain whose dropped mechanisms are not still needed beside the shape
-        beside = _with_shapes(problem, [(fits[subset], b[3]) for b in better], fits_of)
-        best = next((b for b, f in zip(better, beside) if b[1] - bic(f, b[3]) < MIN_DELTA_BIC), None)
+        scored = [(bic(refit, shape), kept, shape) for (kept, shape), refit in zip(tried, refits)]
+        better = sorted((b for b in scored if full - b[0] >= MIN_DELTA_BIC), key=lambda b: b[0])
+
+        def still_needed(replaced, _, shape) -> bool:
+            """The dropped mechanisms, refitted beside the shape, still gain MIN_DELTA_BIC."""
+            beside, = _with_shapes(problem, [(fits[subset], shape)], fits_of)
+            return replaced - bic(beside, shape) >= MIN_DELTA_BIC
+
+        best = next((b for b in better if not still_needed(*b)), None)  # the largest gain that holds
         if best is None:
             break
-        delta, _, kept, shape = best
+        replaced, kept, shape = best
+        delta = full - replaced
         kind, channel, _ = openworld.describe(problem, shape)
         for m in subset - kept:
             dropped[m] = (f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its place "
