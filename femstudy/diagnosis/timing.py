@@ -139,7 +139,7 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     width = CLOCK_SMOOTHING_S / CLOCK_STEP_S
 
     def rate(y: np.ndarray) -> np.ndarray:
-        return np.gradient(ndimage.gaussian_filter1d(y, width, mode="nearest"))
+        return np.gradient(ndimage.gaussian_filter1d(y, width, axis=-1, mode="nearest"), axis=-1)
 
     recorded = [rate(np.interp(grid, rec_t, _smoothed(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
     lo_span, hi_span = sim.span()
@@ -148,26 +148,31 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     own = first <= 0.0 <= last
     if own:
         lags = np.concatenate([[0.0], lags])
-    best, at_zero = (-np.inf, 0.0), -np.inf
-    for lag in lags:
-        tau = grid - lag
-        use = (tau >= lo_span) & (tau <= hi_span)
-        if np.count_nonzero(use) < 20:
+    # the trace covers grid[begin:end] - lag; lags covering as many instants are scored together
+    begin = np.searchsorted(grid, lags + lo_span, side="left")
+    end = np.searchsorted(grid, lags + hi_span, side="right")
+    value = np.full(lags.size, -np.inf)
+    for n in np.unique(end - begin):
+        group = np.flatnonzero(end - begin == n)
+        if n < 20:
             continue
-        F, T = sim.loads(tau[use])
-        score = []
-        for y, s in zip(recorded, [F, T]):
-            if s is None:
-                continue
-            a, b = y[use] - y[use].mean(), rate(s)
-            b = b - b.mean()
-            norm = math.sqrt(float(a @ a) * float(b @ b))
-            score.append(float(a @ b) / norm if norm > 0 else 0.0)
-        value = float(np.mean(score))
-        if lag == 0.0:
-            at_zero = value
-        if value > best[0]:
-            best = (value, float(lag))
-    if own and at_zero >= best[0] - CLOCK_PREFERENCE:
-        return 0.0, at_zero
-    return best[1], best[0]
+        for chunk in np.array_split(group, max(1, group.size * n // 500_000 + 1)):
+            index = begin[chunk, None] + np.arange(n)
+            scores = [_correlation(y[index], rate(s))
+                      for y, s in zip(recorded, sim.loads(grid[index] - lags[chunk, None])) if s is not None]
+            value[chunk] = np.mean(scores, axis=0)
+    if not np.isfinite(value).any():
+        return 0.0, -math.inf  # no lag leaves enough of the trace to correlate
+    k = int(np.argmax(value))
+    if own and value[0] >= value[k] - CLOCK_PREFERENCE:
+        return 0.0, float(value[0])
+    return float(lags[k]), float(value[k])
+
+
+def _correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Pearson correlation of each row of ``a`` with the same row of ``b``."""
+    a = a - a.mean(axis=-1, keepdims=True)
+    b = b - b.mean(axis=-1, keepdims=True)
+    norm = np.sqrt(np.einsum("ij,ij->i", a, a) * np.einsum("ij,ij->i", b, b))
+    dot = np.einsum("ij,ij->i", a, b)
+    return np.divide(dot, norm, out=np.zeros_like(dot), where=norm > 0)
