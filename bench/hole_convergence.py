@@ -12,12 +12,18 @@ hole-circle step (the analogue of remeshing one size with TetWild: same resoluti
 element positions). One heavy job: the finest default level has ~0.2M DOFs per station.
 
     PYTHONPATH=. python bench/hole_convergence.py cases/middiaphysis.toml [--mesh-size 16] [--levels 0.6667 1 1.5]
+        [--json cases/convergence/middiaphysis-hole.json]
+
+``--json`` writes the verdicts for the middle level as a record a case names in
+``loads.convergence`` (femstudy/hole/verdicts.py), so that its failure margins use only
+converged measures.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
@@ -25,9 +31,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from femstudy import fe  # noqa: E402
+from femstudy.atomic import write_text  # noqa: E402
 from femstudy.casefile import load_case  # noqa: E402
+from femstudy.hole import verdicts  # noqa: E402
 from femstudy.hole.mesh import Resolution  # noqa: E402
 from femstudy.hole.study import hole_stresses  # noqa: E402
+from femstudy.jsonable import jsonable  # noqa: E402
 from femstudy.study.femur import femur_model  # noqa: E402
 from femstudy.study.loading import case_loading  # noqa: E402
 from femstudy.sweeps.convergence import assess  # noqa: E402
@@ -39,6 +48,7 @@ def main() -> None:
     parser.add_argument("--mesh-size", type=float, default=None, help="global element size [mm]")
     parser.add_argument("--levels", type=float, nargs="+", default=[2 / 3, 1.0, 1.5], help="hole refinements")
     parser.add_argument("--cache", default=".femstudy-cache", help="mesh cache folder")
+    parser.add_argument("--json", type=Path, help="write the middle level's verdicts here (a loads.convergence record)")
     args = parser.parse_args()
     case = load_case(args.case)
     start = time.perf_counter()
@@ -71,6 +81,7 @@ def main() -> None:
     sets = ([("distance", d, f"{d:g} mm from the hole") for d in base.distances_mm]
             + [("wall", d, f"{d:g} mm beside the wall") for d in base.distances_mm]
             + [("exclusion", r, f"beyond {r:g} mm") for r in base.exclusion_radii_mm])
+    measures = []
     for kind, radius, label in sets:
         values = [r.worst(kind, radius).von_mises_MPa for r in results]
         twin = turned.worst(kind, radius).von_mises_MPa
@@ -83,8 +94,21 @@ def main() -> None:
             ext = "—" if a.extrapolated is None else f"{a.extrapolated:.4g}"
             gci = "—" if a.gci_fine is None else f"{100 * a.gci_fine:.2f} %"
             print(f"| {label} | {line} | {p} | {ext} | {gci} | {a.verdict}: {a.reason} |")
+            verdict, gci_middle = verdicts.middle_level(a)
+            measures.append({"kind": kind, "radius_mm": radius, "values_MPa": values, "noise": noise,
+                             "verdict": verdict, "gci_fine": gci_middle, "ladder": a.as_dict()})
         else:
             print(f"| {label} | {line} | | | | |")
+
+
+    if args.json and measures:
+        conditions = verdicts.conditions(case, middle)
+        if args.mesh_size is not None:
+            conditions["mesh_size_mm"] = args.mesh_size
+        record = {"command": "PYTHONPATH=. python bench/hole_convergence.py " + " ".join(sys.argv[1:]),
+                  "conditions": conditions, "levels": list(args.levels), "wall_element_mm": h, "measures": measures}
+        write_text(args.json, json.dumps(jsonable(record), indent=1))
+        print(f"wrote {args.json}")
 
 
 if __name__ == "__main__":

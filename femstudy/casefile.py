@@ -195,7 +195,10 @@ class LoadsSpec(_Section):
     the loads on a disk of the outer surface only, for comparison with the thesis's point-like
     loading (its peak stress under the patch is mesh-dependent). ``refinement``,
     ``submodel_radius_mm`` and ``depth_cap_mm`` set the local model's mesh and extent,
-    ``smoothing_mm`` the Gaussian smoothing of the bone surfaces it sees (0: none)."""
+    ``smoothing_mm`` the Gaussian smoothing of the bone surfaces it sees (0: none).
+    ``convergence``: a hole-convergence record (``bench/hole_convergence.py --json``, path
+    relative to the case file) whose verdicts decide which measures a failure margin may use
+    (:mod:`femstudy.hole.verdicts`)."""
 
     application: Literal["hole", "surface_patch"] = "hole"
     stations: int = Field(3, ge=1, le=20)
@@ -207,6 +210,7 @@ class LoadsSpec(_Section):
     submodel_radius_mm: float = Field(8.0, gt=2, le=50)
     depth_cap_mm: PositiveMM = 12.0
     smoothing_mm: float = Field(1.0, ge=0, le=5)
+    convergence: Union[str, None] = None
 
     @model_validator(mode="after")
     def _quoted_values_are_measured(self):
@@ -297,12 +301,15 @@ class Case(_Section):
 
     def surface_path(self) -> Path | None:
         """The surface file, resolved against the case file's folder; None for the built-in femur."""
-        if self.geometry.surface == "builtin":
-            return None
-        path = Path(self.geometry.surface).expanduser()
-        if not path.is_absolute() and self.source is not None:
-            path = self.source.parent / path
-        return path
+        return None if self.geometry.surface == "builtin" else self._resolve(self.geometry.surface)
+
+    def convergence_path(self) -> Path | None:
+        """The hole-convergence record (``loads.convergence``), resolved like the surface."""
+        return None if self.loads.convergence is None else self._resolve(self.loads.convergence)
+
+    def _resolve(self, name: str) -> Path:
+        path = Path(name).expanduser()
+        return path if path.is_absolute() or self.source is None else self.source.parent / path
 
 
 def parse_case(text: str, source: Path | None = None) -> Case:
@@ -377,6 +384,10 @@ def check_references(case: Case, bones_dir: Path | None = None) -> None:
         load_bone_set(case.drilling.bone, bones_dir)
     except UserError as exc:
         raise UserError(f"{where}: drilling.bone: {exc}") from None
+    record = case.convergence_path()
+    if record is not None and not record.is_file():
+        raise UserError(f"{where}: loads.convergence: {record} does not exist "
+                        "(paths are relative to the case file's folder; bench/hole_convergence.py --json writes it)")
 
 
 def load_case(path: str | Path, bones_dir: Path | None = None) -> Case:

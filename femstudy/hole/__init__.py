@@ -13,7 +13,8 @@ hole (docs/hole.md). Modules:
 * :mod:`.loads`     unit cutting and chip-evacuation loads on a station's hole;
 * :mod:`.dirichlet` solves with prescribed displacements (the submodel's cut boundary);
 * :mod:`.probe`     displacement and stress at arbitrary points;
-* :mod:`.samples`   points at given distances from the hole surface.
+* :mod:`.samples`   points at given distances from the hole surface;
+* :mod:`.verdicts`  convergence verdicts of the measures, and the margins they admit.
 
 Typical use::
 

@@ -8,6 +8,11 @@ def _fmt(value, digits: int = 4) -> str:
     return "–" if value is None else f"{value:.{digits}g}"
 
 
+def _where(margin: dict) -> str:
+    radius = margin["radius_mm"]
+    return f"{radius:g} mm from the hole" if margin["kind"] == "distance" else f"beyond {radius:g} mm of the hole"
+
+
 def hole_table_rows(hole: dict) -> list[str]:
     """Rows of the run report's main table: von Mises at the headline distance from the hole
     wall and outside the quoted exclusion radius, dynamic, static and their ratio (no thesis
@@ -67,14 +72,22 @@ def hole_section(hole: dict) -> list[str]:
     margins = hole["margins"]
     static = {(r["kind"], r["radius_mm"]): r for r in margins["static"]}
     lines += ["", f"**Margin to failure** near the hole: the smallest load factor to failure over the stations "
-                  f"({margins['criterion']}; {margins['source']}). The stress under the load itself is not used.", "",
-              "| where | strength ratio, dynamic | at tip depth [mm] | strength ratio, static |", "|---|---|---|---|"]
+                  f"({margins['criterion']}; {margins['source']}). The stress under the load itself is not used, "
+                  "and a measure whose convergence is not \"converged\" governs no margin "
+                  f"(verdicts: {margins.get('convergence_source', 'not assessed')}).", "",
+              "| where | strength ratio, dynamic | at tip depth [mm] | strength ratio, static | convergence |",
+              "|---|---|---|---|---|"]
     for r in margins["dynamic"]:
-        where = (f"{r['radius_mm']:g} mm from the hole" if r["kind"] == "distance"
-                 else f"beyond {r['radius_mm']:g} mm of the hole")
         s = static.get((r["kind"], r["radius_mm"]))
-        lines.append(f"| {where} | {_fmt(r['strength_ratio'], 3)} | {r['tip_depth_mm']:.2f} | "
-                     f"{_fmt(s['strength_ratio'] if s else None, 3)} |")
+        verdict = r.get("convergence", "not assessed")
+        if r.get("gci_fine") is not None:
+            verdict += f" (GCI {100 * r['gci_fine']:.2g} %)"
+        lines.append(f"| {_where(r)} | {_fmt(r['strength_ratio'], 3)} | {r['tip_depth_mm']:.2f} | "
+                     f"{_fmt(s['strength_ratio'] if s else None, 3)} | {verdict} |")
+    governing = margins.get("governing_dynamic")
+    lines += ["", f"Governing margin (converged measures only): {_fmt(governing['strength_ratio'], 3)}, "
+                  f"{_where(governing)}."
+              if governing else "Governing margin: none quoted, no measure has a \"converged\" verdict for this run."]
     return lines
 
 

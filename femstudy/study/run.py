@@ -28,6 +28,7 @@ import numpy as np
 from femstudy import __version__, fe
 from femstudy.casefile import Case
 from femstudy.femur_model import REGION_NAMES
+from femstudy.hole import verdicts
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.fe.linsolve import available_memory_bytes
 from femstudy.meshing.model import surface_file
@@ -205,6 +206,8 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         case = case.model_copy(update={"mesh": case.mesh.model_copy(update={"size_mm": float(mesh_size_mm)})})
     clock = {"start": time.perf_counter()}
     feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force)
+    record_path = case.convergence_path()
+    record = None if record_path is None else verdicts.read_record(record_path)  # a bad record fails now
     log.info("case '%s': building or loading the femur mesh", case.name)
     model = femur_model(case, cache_dir)
     clock["mesh"] = time.perf_counter()
@@ -274,7 +277,8 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
     if hole is not None:  # the hole's measures replace the patch's mesh-dependent peak for margins
         summary["hole"] = hole.to_json()
-        summary["margins"] = hole.margins()
+        summary["margins"] = verdicts.gate(hole.margins(), record, verdicts.conditions(case))
+        summary["hole"]["margins"] = summary["margins"]
     summary["timings"]["hole_s"] = clock["hole"] - clock["dynamic"]
     summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the results
     result = StudyResult(case, dynamic, static, dynamics, loading, summary, out_dir, hole)

@@ -1,0 +1,98 @@
+"""Convergence verdicts of the hole measures, and the failure margins they admit.
+
+A margin to failure means something only where the stress behind it has converged. The
+verdicts come from a measurement of the hole model's convergence on the same femur, global
+mesh and hole refinement as the run — a record written by ``bench/hole_convergence.py --json``
+(three hole refinements judged by :func:`femstudy.sweeps.convergence.assess`, formal order 2,
+against the placement noise) — named in the case by ``loads.convergence``. :func:`gate`
+marks each margin row with its measure's verdict and quotes as the *governing* margin the
+smallest strength ratio among the rows whose verdict is "converged" (GCI ≤ 5 %, or within
+the noise); without a record, or one made under other conditions, no margin governs.
+
+The record speaks for one hole refinement, the middle of its three levels (the case's own,
+so that the study runs at the cost of that level): a measure judged "converged" on the ladder
+keeps that verdict at the middle level when its own error estimate, GCI_fine · r^p (the
+error scales as h^p in the asymptotic range, r the refinement ratio, p the order used), is
+still at most 5 %, or when all three levels agree within the placement noise
+(:func:`middle_level`).
+
+Record format (JSON): ``{"conditions": {...}, "measures": [{"kind": "distance" | "wall" |
+"exclusion", "radius_mm": float, "verdict": str, "reason": str, "gci_fine": float | null,
+"values_MPa": [...]}, ...]}``, the conditions being those of :func:`conditions`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from femstudy.errors import UserError
+from femstudy.sweeps.convergence import GCI_CONVERGED
+
+#: Conditions a record must share with the run for its verdicts to apply.
+MATCHED = ("surface", "mesh_size_mm", "site_size_mm", "order", "refinement", "submodel_radius_mm", "smoothing_mm")
+
+
+def conditions(case, refinement: float | None = None) -> dict:
+    """The conditions of ``case`` that a hole-convergence record is tied to (``refinement``:
+    the hole refinement the verdict speaks for, default the case's)."""
+    return {"surface": case.geometry.surface, "mesh_size_mm": case.mesh.size_mm,
+            "site_size_mm": case.mesh.site_size_mm, "order": case.mesh.order,
+            "refinement": case.loads.refinement if refinement is None else refinement,
+            "submodel_radius_mm": case.loads.submodel_radius_mm, "smoothing_mm": case.loads.smoothing_mm}
+
+
+def middle_level(assessment) -> tuple[str, float | None]:
+    """Verdict and GCI of the middle of the three levels behind ``assessment``
+    (:class:`femstudy.sweeps.convergence.Assessment`; see the module docstring)."""
+    if assessment.verdict != "converged":
+        return assessment.verdict, None
+    if assessment.order_used is None:  # converged within the placement noise: the spread is the estimate
+        return "converged", assessment.gci_fine
+    h_fine, h_middle = assessment.h[:2]
+    gci = assessment.gci_fine * (h_middle / h_fine) ** assessment.order_used
+    return ("converged" if gci <= GCI_CONVERGED else "converging"), gci
+
+
+def read_record(path: Path) -> dict:
+    """A hole-convergence record, checked for the keys :func:`gate` needs."""
+    try:
+        record = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise UserError(f"loads.convergence: {path} does not exist (write it with bench/hole_convergence.py --json)") from None
+    except (OSError, ValueError) as exc:
+        raise UserError(f"loads.convergence: {path} is not readable JSON ({exc})") from None
+    measures = record.get("measures") if isinstance(record, dict) else None
+    if not (isinstance(record.get("conditions") if isinstance(record, dict) else None, dict)
+            and isinstance(measures, list)
+            and all(isinstance(m, dict) and {"kind", "radius_mm", "verdict"} <= m.keys() for m in measures)):
+        raise UserError(f"loads.convergence: {path} is not a hole-convergence record "
+                        "(it needs 'conditions' and 'measures' with kind, radius_mm and verdict)")
+    return record
+
+
+def gate(margins: dict, record: dict | None, run_conditions: dict) -> dict:
+    """``margins`` (:meth:`femstudy.hole.study.HoleResult.margins`) with each row's
+    ``convergence`` verdict and, per loading, the ``governing`` row: the smallest strength
+    ratio among converged measures (None when none is), and ``convergence_source``."""
+    verdicts, source = {}, "not assessed: the case names no hole-convergence record (loads.convergence)"
+    if record is not None:
+        differ = [k for k in MATCHED if k in record["conditions"] and record["conditions"][k] != run_conditions.get(k)]
+        if differ:
+            source = ("not assessed: the record was made with other " + ", ".join(
+                f"{k} ({record['conditions'][k]} against {run_conditions.get(k)})" for k in differ))
+        else:
+            verdicts = {(m["kind"], float(m["radius_mm"])): m for m in record["measures"]}
+            source = record.get("command", "hole-convergence record")
+    out = {**margins, "convergence_source": source}
+    for loading in ("dynamic", "static"):
+        rows = []
+        for row in margins.get(loading, []):
+            found = verdicts.get((row["kind"], float(row["radius_mm"])))
+            rows.append({**row, "convergence": found["verdict"] if found else "not assessed",
+                         "gci_fine": found.get("gci_fine") if found else None})
+        out[loading] = rows
+        usable = [r for r in rows if r["convergence"] == "converged" and math.isfinite(r["strength_ratio"])]
+        out[f"governing_{loading}"] = min(usable, key=lambda r: r["strength_ratio"]) if usable else None
+    return out
