@@ -254,32 +254,30 @@ def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: d
 def _variant_stage(problem: Problem, fits: dict, name: str, starts: tuple, fits_of=fit_each) -> None:
     """Refit the subsets with pulsation adding the optional parameter ``name``: first the best
     one, from each value in ``starts``; if it gains more than the parameter's BIC cost plus
-    ``MIN_PULSE_GAIN`` there, every other one (in one batch of ``fits_of``) from the value
-    found, kept where it gains as much. A subset that would stay behind the best one's refit
-    even gaining twice as much (``REACH``) is left as it is: no selection can pick it (the
-    all-mechanism subset, whose misfit scales the BIC, is always refitted)."""
+    ``MIN_PULSE_GAIN`` there, every other one from the value found, kept where it gains as much.
+    A subset that would stay behind the best one's refit even gaining twice as much
+    (``REACH``) is left as it is: no selection can pick it (the all-mechanism subset, whose
+    misfit scales the BIC, is always refitted)."""
     factor = problem.n_eff_factor
     cost = math.log(problem.y.size * factor) + MIN_PULSE_GAIN
-
-    def request(subset: frozenset, values) -> tuple:
-        plain = fits[subset]
-        return problem, subset, [{**plain.params, name: v} for v in values], {"variant": plain.variant + (name,)}
-
-    def gain(subset: frozenset, refit: Fit) -> float:
-        return (fits[subset].chi2_total - refit.chi2_total) * factor
-
     pulsed = sorted((s for s in fits if "feed_pulsation" in s), key=lambda s: fits[s].chi2_total)
-    best, = fits_of([request(pulsed[0], starts)])
-    best_gain = gain(pulsed[0], best)
-    if best_gain <= cost:
-        return  # no gain where pulsation fits best: the plain form stays everywhere
-    fits[pulsed[0]] = best
     full = max(fits, key=len)
-    rest = [s for s in pulsed[1:]
-            if s == full or (fits[s].chi2_total - best.chi2_total) * factor <= REACH * best_gain + cost]
-    for subset, refit in zip(rest, fits_of([request(s, (best.params[name],)) for s in rest])):
-        if gain(subset, refit) > cost:
-            fits[subset] = refit
+    best = None
+    for subset in pulsed:
+        plain = fits[subset]
+        if best is not None and subset != full and (
+                (plain.chi2_total - best[0]) * factor > REACH * best[1] + cost):
+            continue
+        variant = plain.variant + (name,)
+        refit, = fits_of([(problem, subset, [{**plain.params, name: v} for v in starts], {"variant": variant})])
+        if (plain.chi2_total - refit.chi2_total) * factor <= cost:
+            if subset == pulsed[0]:
+                return  # no gain where pulsation fits best: the plain form stays everywhere
+            continue
+        fits[subset] = refit
+        starts = (refit.params[name],)
+        if best is None:
+            best = (refit.chi2_total, (plain.chi2_total - refit.chi2_total) * factor)
 
 
 def fit_all(problem: Problem, base_params: dict, seed: dict, fits_of=fit_each) -> dict:
