@@ -77,8 +77,19 @@ def test_changes_within_the_measured_remeshing_noise_are_convergence():
 
 
 def test_oscillation_beyond_the_noise_is_flagged():
-    a = assess("q", [1.0, 2.0, 4.0], [1.0, 1.1, 1.05], formal_order=2, noise=0.01)
-    assert a.verdict == "not converging" and "alternates" in a.reason
+    a = assess("q", [1.0, 2.0, 4.0], [1.0, 1.1, 1.05], formal_order=2, noise=0.01)  # swing grows: R = -2
+    assert a.verdict == "not converging" and "does not shrink" in a.reason
+
+
+@pytest.mark.parametrize("values, verdict, uncertainty", [
+    ([5.984, 6.012, 5.942], "converged", 0.5 * 0.070 / 5.984),  # the hole's 1 mm measure on the built-in femur
+    ([10.0, 11.0, 9.0], "converging", 0.1),                       # swing shrinks but spans 20 %
+])
+def test_a_shrinking_oscillation_converges_with_half_its_range_as_uncertainty(values, verdict, uncertainty):
+    a = assess("q", [0.2, 0.3, 0.45], values, formal_order=2, noise=0.001)
+    assert -1 < a.ratio_R < 0
+    assert a.verdict == verdict and a.gci_fine == pytest.approx(uncertainty, rel=1e-9)
+    assert a.extrapolated is None and "oscillatory convergence" in a.reason
 
 
 def test_very_low_order_is_not_trusted():

@@ -24,9 +24,13 @@ Verdicts, in order:
 - "converged" within the noise: the three values agree within the measured remeshing noise
   (fTetWild gives a different mesh for the same input; ``femstudy sweep`` remeshes one size
   again to measure how much the quantity moves), with that spread as its uncertainty;
-- "not converging": the changes alternate in sign or grow beyond the noise (R = ε21/ε32 < 0,
-  or R at or above ln r21 / ln r32), there is no observed order, or it is under a quarter of
-  the formal one;
+- oscillatory convergence: the changes alternate in sign with a shrinking swing
+  (−1 < R = ε21/ε32 < 0): no order or extrapolation is defined, and the uncertainty is half the
+  range of the three values (Stern et al. 2001, J Fluids Eng 123:793–802), "converged" when
+  that is at most :data:`GCI_CONVERGED`, else "converging";
+- "not converging": the changes alternate in sign without shrinking (R ≤ −1) or grow beyond
+  the noise (R at or above ln r21 / ln r32), there is no observed order, or it is under a
+  quarter of the formal one;
 - "converged" when monotone with GCI_fine ≤ :data:`GCI_CONVERGED`, else "converging".
 """
 
@@ -120,8 +124,13 @@ def assess(quantity: str, h, values, formal_order: float, singular: bool = False
                                    f"{100 * noise:.2f} % remeshing noise (two meshes of one size differ that much); "
                                    "GCI column: that spread", extrapolated=f1, gci=spread)
     if R < 0:
-        return result("not converging", f"oscillating (R = {R:.3g}) by more than the {100 * noise:.2f} % remeshing "
-                                        "noise: the change alternates in sign")
+        if R > -1:  # oscillatory convergence: the swing shrinks under refinement
+            u = 0.5 * spread
+            return result("converged" if u <= GCI_CONVERGED else "converging",
+                          f"oscillating with a shrinking swing (R = {R:.3g}, |R| < 1): oscillatory convergence, "
+                          f"uncertainty half the range of the three values, {100 * u:.2g} % (GCI column)", gci=u)
+        return result("not converging", f"oscillating (R = {R:.3g}, |R| >= 1) by more than the {100 * noise:.2f} % "
+                                        "remeshing noise: the change alternates in sign and does not shrink")
     if R >= bound:
         return result("not converging", f"diverging (R = {R:.3g} >= {bound:.3g}): the change does not shrink under "
                                         "refinement")
