@@ -23,7 +23,7 @@ def record(conditions: dict) -> dict:
 
 
 def test_the_governing_margin_is_the_smallest_among_converged_measures_only():
-    gated = verdicts.gate(MARGINS, record(verdicts.conditions(CASE)), verdicts.conditions(CASE))
+    gated = verdicts.gate(MARGINS, verdicts.applicable(record(verdicts.conditions(CASE)), verdicts.conditions(CASE)))
     assert [r["convergence"] for r in gated["dynamic"]] == ["not converging", "converged"]
     assert gated["governing_dynamic"]["strength_ratio"] == 9.0  # not the 4.0 of the unconverged 0.5 mm measure
     assert gated["governing_static"]["strength_ratio"] == 12.0
@@ -31,11 +31,11 @@ def test_the_governing_margin_is_the_smallest_among_converged_measures_only():
 
 def test_a_record_made_under_other_conditions_admits_no_margin():
     other = {**verdicts.conditions(CASE), "mesh_size_mm": 16.0}
-    gated = verdicts.gate(MARGINS, record(other), verdicts.conditions(CASE))
+    gated = verdicts.gate(MARGINS, verdicts.applicable(record(other), verdicts.conditions(CASE)))
     assert {r["convergence"] for r in gated["dynamic"]} == {"not assessed"}
     assert gated["governing_dynamic"] is None
     assert "mesh_size_mm (16.0 against 8.0)" in gated["convergence_source"]
-    assert verdicts.gate(MARGINS, None, verdicts.conditions(CASE))["governing_dynamic"] is None
+    assert verdicts.gate(MARGINS, verdicts.applicable(None, verdicts.conditions(CASE)))["governing_dynamic"] is None
 
 
 def test_the_middle_level_inherits_the_fine_verdict_scaled_by_r_to_the_p():

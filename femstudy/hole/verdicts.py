@@ -72,26 +72,39 @@ def read_record(path: Path) -> dict:
     return record
 
 
-def gate(margins: dict, record: dict | None, run_conditions: dict) -> dict:
+def applicable(record: dict | None, run_conditions: dict) -> dict:
+    """The verdicts a run may use: ``{"source": text, "measures": [{"kind", "radius_mm",
+    "verdict", "gci_fine"}, ...]}``, empty when there is no record or it was made under other
+    conditions (the source then says which)."""
+    if record is None:
+        return {"source": "not assessed: the case names no hole-convergence record (loads.convergence)", "measures": []}
+    differ = [k for k in MATCHED if k in record["conditions"] and record["conditions"][k] != run_conditions.get(k)]
+    if differ:
+        return {"source": "not assessed: the record was made with other " + ", ".join(
+            f"{k} ({record['conditions'][k]} against {run_conditions.get(k)})" for k in differ), "measures": []}
+    return {"source": record.get("command", "hole-convergence record"),
+            "measures": [{"kind": m["kind"], "radius_mm": float(m["radius_mm"]), "verdict": m["verdict"],
+                          "gci_fine": m.get("gci_fine")} for m in record["measures"]]}
+
+
+def verdict_of(convergence: dict, kind: str, radius_mm: float) -> dict:
+    """The entry of :func:`applicable`'s result for one measure ("not assessed" if absent)."""
+    for m in convergence["measures"]:
+        if m["kind"] == kind and abs(m["radius_mm"] - radius_mm) < 1e-9:
+            return m
+    return {"kind": kind, "radius_mm": radius_mm, "verdict": "not assessed", "gci_fine": None}
+
+
+def gate(margins: dict, convergence: dict) -> dict:
     """``margins`` (:meth:`femstudy.hole.study.HoleResult.margins`) with each row's
-    ``convergence`` verdict and, per loading, the ``governing`` row: the smallest strength
-    ratio among converged measures (None when none is), and ``convergence_source``."""
-    verdicts, source = {}, "not assessed: the case names no hole-convergence record (loads.convergence)"
-    if record is not None:
-        differ = [k for k in MATCHED if k in record["conditions"] and record["conditions"][k] != run_conditions.get(k)]
-        if differ:
-            source = ("not assessed: the record was made with other " + ", ".join(
-                f"{k} ({record['conditions'][k]} against {run_conditions.get(k)})" for k in differ))
-        else:
-            verdicts = {(m["kind"], float(m["radius_mm"])): m for m in record["measures"]}
-            source = record.get("command", "hole-convergence record")
-    out = {**margins, "convergence_source": source}
+    ``convergence`` verdict (from :func:`applicable`) and, per loading, the ``governing`` row:
+    the smallest strength ratio among converged measures (None when none is)."""
+    out = {**margins, "convergence_source": convergence["source"]}
     for loading in ("dynamic", "static"):
         rows = []
         for row in margins.get(loading, []):
-            found = verdicts.get((row["kind"], float(row["radius_mm"])))
-            rows.append({**row, "convergence": found["verdict"] if found else "not assessed",
-                         "gci_fine": found.get("gci_fine") if found else None})
+            found = verdict_of(convergence, row["kind"], float(row["radius_mm"]))
+            rows.append({**row, "convergence": found["verdict"], "gci_fine": found["gci_fine"]})
         out[loading] = rows
         usable = [r for r in rows if r["convergence"] == "converged" and math.isfinite(r["strength_ratio"])]
         out[f"governing_{loading}"] = min(usable, key=lambda r: r["strength_ratio"]) if usable else None

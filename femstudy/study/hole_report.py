@@ -3,9 +3,17 @@
 
 from __future__ import annotations
 
+from femstudy.hole.verdicts import verdict_of
+
 
 def _fmt(value, digits: int = 4) -> str:
     return "–" if value is None else f"{value:.{digits}g}"
+
+
+def _verdict(hole: dict, kind: str, radius_mm: float) -> str:
+    """A measure's convergence verdict at this run's mesh, with its uncertainty [%]."""
+    m = verdict_of(hole.get("convergence", {"measures": []}), kind, radius_mm)
+    return m["verdict"] + (f" ({100 * m['gci_fine']:.2g} %)" if m["gci_fine"] is not None else "")
 
 
 def _where(margin: dict) -> str:
@@ -15,8 +23,8 @@ def _where(margin: dict) -> str:
 
 def hole_table_rows(hole: dict) -> list[str]:
     """Rows of the run report's main table: von Mises at the headline distance from the hole
-    wall and outside the quoted exclusion radius, dynamic, static and their ratio (no thesis
-    value: the thesis's stresses are point-load peaks)."""
+    wall and outside the quoted exclusion radius, dynamic, static and their ratio, each with its
+    convergence verdict (no thesis value: the thesis's stresses are point-load peaks)."""
     options = hole["options"]
     picks = [("distance", options["headline_distance_mm"], "von Mises {r:g} mm from the hole wall [MPa]"),
              ("exclusion", options["exclusion_radius_mm"], "max von Mises beyond {r:g} mm of the hole wall [MPa]")]
@@ -24,7 +32,7 @@ def hole_table_rows(hole: dict) -> list[str]:
     for kind, radius, label in picks:
         row = next(r for r in hole[kind] if abs(r["radius_mm"] - radius) < 1e-9)
         d, s = row["dynamic"], row["static"]
-        lines.append(f"| {label.format(r=radius)} | {_fmt(d['von_mises_MPa'])} (tip {d['tip_depth_mm']:.2f} mm) | "
+        lines.append(f"| {label.format(r=radius)}, {_verdict(hole, kind, radius)} | {_fmt(d['von_mises_MPa'])} (tip {d['tip_depth_mm']:.2f} mm) | "
                      f"{_fmt(s['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} | – | – | – |")
     return lines
 
@@ -33,13 +41,14 @@ def hole_section(hole: dict) -> list[str]:
     """The hole's stations, the stresses at each distance from the wall, the exclusion-radius
     sensitivity and the failure margins, as Markdown lines."""
     options = hole["options"]
+    source = hole.get("convergence", {}).get("source", "not assessed")
     lines = ["**Stresses near the drilled hole** (docs/hole.md): the global model drives local models of the "
              f"hole at {len(hole['stations'])} depth station{'s' if len(hole['stations']) != 1 else ''} (radius {options['submodel_radius_mm']:g} mm, "
              f"refinement {options['refinement']:g}); cutting thrust and torque on the drill-point cone, chip "
              "evacuation torque as wall friction and its thrust on the bottom. Maxima over the stations and over "
              "every point at the stated distance from the hole surface (wall and cone; the last column: the points "
-             "beside the cylindrical wall only). Their convergence under refinement of the hole model is measured "
-             "by `bench/hole_convergence.py` and `femstudy sweep` (docs/hole.md).", "",
+             "beside the cylindrical wall only). The convergence column is each measure's verdict under refinement "
+             f"of the hole model at this mesh (verdicts: {source}; docs/failure.md).", "",
              "| station | tip depth [mm] | time [s] | cutting thrust [N] | cutting torque [N·mm] | evacuation thrust [N] "
              "| evacuation torque [N·mm] | DOFs | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
     for s in hole["stations"]:
@@ -48,8 +57,8 @@ def hole_section(hole: dict) -> list[str]:
                      f"{s['dofs']:,} | {s['seconds']:.1f} |")
     lines += ["", "| distance from the hole [mm] | von Mises dynamic [MPa] | at tip depth [mm] | max principal stress "
               "[MPa] | min principal stress [MPa] | max principal strain [µε] | min principal strain [µε] | "
-              "von Mises static [MPa] | ratio | beside the wall: von Mises dynamic [MPa] |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
+              "von Mises static [MPa] | ratio | convergence | beside the wall: von Mises dynamic [MPa] | its "
+              "convergence |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     wall = {r["radius_mm"]: r for r in hole.get("wall", [])}
     for row in hole["distance"]:
         d = row["dynamic"]
@@ -58,17 +67,19 @@ def hole_section(hole: dict) -> list[str]:
                      f"{_fmt(d['max_principal_stress_MPa'])} | {_fmt(d['min_principal_stress_MPa'])} | "
                      f"{1e6 * d['max_principal_strain']:.0f} | {1e6 * d['min_principal_strain']:.0f} | "
                      f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} | "
-                     f"{_fmt(beside)} |")
+                     f"{_verdict(hole, 'distance', row['radius_mm'])} | {_fmt(beside)} | "
+                     f"{_verdict(hole, 'wall', row['radius_mm']) if beside is not None else '–'} |")
     lines += ["", f"Exclusion-radius sensitivity (maximum von Mises farther than the radius from the hole surface, "
                   f"excluding {options['cut_margin_mm']:g} mm at the local model's cut boundary and the clamp zones; "
                   f"quoted radius {options['exclusion_radius_mm']:g} mm):", "",
               "| exclusion radius [mm] | von Mises dynamic [MPa] | at [mm] (x, y, z) | its distance from the hole [mm] "
-              "| von Mises static [MPa] | ratio |", "|---|---|---|---|---|---|"]
+              "| von Mises static [MPa] | ratio | convergence |", "|---|---|---|---|---|---|---|"]
     for row in hole["exclusion"]:
         d = row["dynamic"]
         where = ", ".join(f"{d[f'location_{a}_mm']:.1f}" for a in "xyz")
         lines.append(f"| {row['radius_mm']:g} | {_fmt(d['von_mises_MPa'])} | ({where}) | {d['location_distance_mm']:.2f} | "
-                     f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} |")
+                     f"{_fmt(row['static']['von_mises_MPa'])} | {_fmt(row['ratio_dynamic_to_static'], 3)} | "
+                     f"{_verdict(hole, 'exclusion', row['radius_mm'])} |")
     margins = hole["margins"]
     static = {(r["kind"], r["radius_mm"]): r for r in margins["static"]}
     lines += ["", f"**Margin to failure** near the hole: the smallest load factor to failure over the stations "
@@ -79,11 +90,8 @@ def hole_section(hole: dict) -> list[str]:
               "|---|---|---|---|---|"]
     for r in margins["dynamic"]:
         s = static.get((r["kind"], r["radius_mm"]))
-        verdict = r.get("convergence", "not assessed")
-        if r.get("gci_fine") is not None:
-            verdict += f" (GCI {100 * r['gci_fine']:.2g} %)"
         lines.append(f"| {_where(r)} | {_fmt(r['strength_ratio'], 3)} | {r['tip_depth_mm']:.2f} | "
-                     f"{_fmt(s['strength_ratio'] if s else None, 3)} | {verdict} |")
+                     f"{_fmt(s['strength_ratio'] if s else None, 3)} | {_verdict(hole, r['kind'], r['radius_mm'])} |")
     governing = margins.get("governing_dynamic")
     lines += ["", f"Governing margin (converged measures only): {_fmt(governing['strength_ratio'], 3)}, "
                   f"{_where(governing)}."

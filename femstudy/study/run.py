@@ -277,8 +277,8 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
     if hole is not None:  # the hole's measures replace the patch's mesh-dependent peak for margins
         summary["hole"] = hole.to_json()
-        summary["margins"] = verdicts.gate(hole.margins(), record, verdicts.conditions(case))
-        summary["hole"]["margins"] = summary["margins"]
+        summary["hole"]["convergence"] = verdicts.applicable(record, verdicts.conditions(case))
+        summary["margins"] = summary["hole"]["margins"] = verdicts.gate(hole.margins(), summary["hole"]["convergence"])
     summary["timings"]["hole_s"] = clock["hole"] - clock["dynamic"]
     summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the results
     result = StudyResult(case, dynamic, static, dynamics, loading, summary, out_dir, hole)
