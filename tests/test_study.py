@@ -108,9 +108,27 @@ def test_hole_stresses_replace_the_patch_peak(p2_run):
     assert summary["margins"]["basis"] == "hole"
     assert all(m["strength_ratio"] > 1 for m in summary["margins"]["dynamic"])
     text = (out / "report.md").read_text()
-    assert "| von Mises 1 mm from the hole wall [MPa] |" in text
-    assert "| max von Mises beyond 1 mm of the hole wall [MPa] |" in text
+    assert "| von Mises 1 mm from the hole wall [MPa], not assessed |" in text
+    assert "| max von Mises beyond 1 mm of the hole wall [MPa], not assessed |" in text
     assert "maximum von Mises stress [MPa]" not in text and "safety factor" not in text
+    # no hole-convergence record: no measure is known to be converged, so no margin governs
+    assert summary["margins"]["governing_dynamic"] is None and "Governing margin: none quoted" in text
+
+
+def test_a_convergence_record_decides_which_margin_governs(p2_run):
+    from femstudy.hole import verdicts
+    from femstudy.study.hole_report import hole_section
+
+    summary, _ = p2_run
+    convergence = {"source": "a test record", "measures": [
+        {"kind": "distance", "radius_mm": 2.0, "verdict": "converged", "gci_fine": 0.01},
+        {"kind": "distance", "radius_mm": 1.0, "verdict": "not converging", "gci_fine": None}]}
+    margins = verdicts.gate(summary["margins"], convergence)
+    text = "\n".join(hole_section({**summary["hole"], "convergence": convergence, "margins": margins}))
+    governing = margins["governing_dynamic"]
+    assert (governing["kind"], governing["radius_mm"]) == ("distance", 2.0)  # not the 1 mm one, though nearer
+    assert f"Governing margin (converged measures only): {governing['strength_ratio']:.3g}, 2 mm from the hole." in text
+    assert "| converged (1 %) |" in text and "| not converging |" in text
 
 
 def test_fields_are_readable_time_series(p2_run):
