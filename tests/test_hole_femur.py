@@ -113,3 +113,23 @@ def test_smoothed_columns_are_the_gaussian_blur_of_the_tube():
         curvature = radius ** 2 / (radius ** 2 - x ** 2) ** 1.5
         expected = R_OUT - np.sqrt(radius ** 2 - x ** 2) + sigma ** 2 / 2 * curvature
         np.testing.assert_allclose(depth, expected, atol=0.005 + 0.1 * sigma ** 2 / 2 * curvature.max())
+
+
+def test_a_narrow_bone_shrinks_the_local_model_to_what_it_surrounds():
+    """Columns more than R_OUT = 14 mm to the side of the drill axis miss the tube: a requested
+    16 mm local model shrinks (0.5 mm steps) to the largest radius all of whose columns meet the
+    bone, smoothing near the edge averages only the columns on bone, and a bone narrower than
+    the measures need is one clear error."""
+    from femstudy.hole.femur import smooth_columns
+    from femstudy.hole.study import fitting_radius
+
+    mesh, outer = tube()
+    columns = femur_columns(mesh, outer, frame(), depth_cap_mm=20.0)
+    assert columns.covers(np.array([[0.0, 13.0], [0.0, 14.5]])).tolist() == [True, False]
+    radius = fitting_radius(columns, 16.0, 4.0)
+    assert 13.0 <= radius <= R_OUT  # 14: the ring touches the 96-gon at its vertex
+    smooth = smooth_columns(columns, 12.0, 1.0)  # its 4σ reach passes the tube's edge: no error
+    x = lateral_offset(columns, np.array([[0.0, 2.0]]))
+    assert smooth.top(np.array([[0.0, 2.0]]))[0] == pytest.approx(R_OUT - np.sqrt(R_OUT ** 2 - x[0] ** 2), abs=0.05)
+    with pytest.raises(UserError, match="too narrow for a local model"):
+        fitting_radius(columns, 16.0, 14.5)

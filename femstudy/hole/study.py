@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from femstudy.drilling import allotta, evaluate
-from femstudy.errors import require
+from femstudy.errors import UserError, require
 from femstudy.hole.coupling import cut_boundary
 from femstudy.hole.dirichlet import factorize_prescribed
 from femstudy.hole.femur import femur_columns, smooth_columns
@@ -238,6 +238,11 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         c, s = np.cos(np.radians(options.rotation_deg)), np.sin(np.radians(options.rotation_deg))
         frame = HoleFrame(frame.origin, frame.axis, c * frame.e1 + s * frame.e2, c * frame.e2 - s * frame.e1)
     columns = femur_columns(model.mesh, outer_faces(model.mesh, model.frame), frame, options.depth_cap_mm)
+    radius = fitting_radius(columns, options.submodel_radius_mm, case.drill.diameter_mm / 2 + options.cut_margin_mm + 1.0)
+    if radius < options.submodel_radius_mm:
+        log.warning("hole model: radius %.1f mm instead of %.1f mm, the largest that stays on the bone around the "
+                    "hole; measures farther from the hole than it allows are missing", radius, options.submodel_radius_mm)
+        options = replace(options, submodel_radius_mm=radius)
     if options.smoothing_mm > 0:
         columns = smooth_columns(columns, options.submodel_radius_mm, options.smoothing_mm)
     hole = hole_mesh(frame, case.drill.diameter_mm, case.drill.point_angle_deg, options.submodel_radius_mm, tips,
@@ -269,6 +274,27 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
                                cut.moved_mm))
         log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
     return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds)
+
+
+#: Azimuths and radial step [mm] of the probe for the largest local model that stays on the bone.
+PROBE_AZIMUTHS = 96
+PROBE_STEP_MM = 0.5
+
+
+def fitting_radius(columns, requested_mm: float, least_mm: float) -> float:
+    """The largest local-model radius [mm], at most ``requested_mm``, whose outer ring of columns
+    all meet the bone's outer surface (at a narrow site, such as the femoral neck, an 8 mm disk
+    reaches past the bone); a radius below ``least_mm`` leaves no room for the measures."""
+    angles = np.linspace(0.0, 2 * np.pi, PROBE_AZIMUTHS, endpoint=False)
+    rings = np.concatenate([f * np.column_stack([np.cos(angles), np.sin(angles)]) for f in (0.25, 0.5, 0.75, 1.0)])
+    radius = requested_mm
+    while radius >= least_mm:
+        if np.all(columns.covers(radius * rings)):
+            return radius
+        radius -= PROBE_STEP_MM
+    raise UserError(f"the bone around the drill site is too narrow for a local model of the hole: its outer surface "
+                    f"does not surround the drill axis even {least_mm:.1f} mm from it (use loads.application = "
+                    "\"surface_patch\" at this site)")
 
 
 def _excluded(local, cut_dofs: np.ndarray, heights: np.ndarray, up: np.ndarray, clamp_mm: float,
