@@ -128,7 +128,7 @@ def test_a_narrow_bone_shrinks_the_local_model_to_what_it_surrounds():
     assert columns.covers(np.array([[0.0, 13.0], [0.0, 14.5]])).tolist() == [True, False]
     radius = fitting_radius(columns, 16.0, 4.0)
     assert 13.0 <= radius <= R_OUT  # 14: the ring touches the 96-gon at its vertex
-    smooth = smooth_columns(columns, 12.0, 1.0)  # its 4σ reach passes the tube's edge: no error
+    smooth = smooth_columns(columns, 12.0, 1.0, spacing_mm=0.4)  # its 4σ reach passes the tube's edge: no error
     x = lateral_offset(columns, np.array([[0.0, 2.0]]))
     assert smooth.top(np.array([[0.0, 2.0]]))[0] == pytest.approx(R_OUT - np.sqrt(R_OUT ** 2 - x[0] ** 2), abs=0.05)
     with pytest.raises(UserError, match="too narrow for a local model"):
