@@ -71,9 +71,19 @@ def test_changes_within_the_measured_remeshing_noise_are_convergence():
     noise they are divergence."""
     h, v = [2.024, 2.412, 3.032], [0.053851, 0.053996, 0.054047]
     a = assess("max_deflection_mm", h, v, formal_order=3, noise=0.004)
-    assert a.verdict == "converged" and a.gci_fine == pytest.approx(0.0036, abs=1e-4) and "noise" in a.reason
+    assert a.verdict == "converged" and a.gci_fine == 0.004 and "noise" in a.reason  # the noise bounds it
     b = assess("max_deflection_mm", h, v, formal_order=3, noise=0.0)
     assert b.verdict == "not converging" and "diverging" in b.reason
+
+
+def test_agreement_within_a_large_noise_is_not_convergence_to_five_percent():
+    """The femoral neck's hole stress 1 mm from the wall: 9.36, 9.823, 10.08 MPa on three hole
+    refinements, against an 11.1 % placement noise. They agree within the noise, but that is no
+    evidence of convergence to 5 %; nor is a 2.8 % spread inside an 8 % noise."""
+    a = assess("hole_1mm", [0.2, 0.3, 0.45], [9.36, 9.823, 10.08], formal_order=2, noise=0.111)
+    assert a.verdict == "converging" and a.gci_fine == 0.111
+    b = assess("hole_5mm", [0.2, 0.3, 0.45], [2.388, 2.383, 2.448], formal_order=2, noise=0.0807)
+    assert b.verdict == "converging" and b.gci_fine == 0.0807
 
 
 def test_oscillation_beyond_the_noise_is_flagged():

@@ -23,7 +23,9 @@ Verdicts, in order:
   re-entrant corner) is never called converged, whatever its values do;
 - "converged" within the noise: the three values agree within the measured remeshing noise
   (fTetWild gives a different mesh for the same input; ``femstudy sweep`` remeshes one size
-  again to measure how much the quantity moves), with that spread as its uncertainty;
+  again to measure how much the quantity moves), with the noise as its uncertainty (changes
+  below it are not resolved), which must itself be at most :data:`GCI_CONVERGED` (else
+  "converging": a noise that large hides whether it converges);
 - oscillatory convergence: the changes alternate in sign with a shrinking swing
   (−1 < R = ε21/ε32 < 0): no order or extrapolation is defined, and the uncertainty is half the
   range of the three values (Stern et al. 2001, J Fluids Eng 123:793–802), "converged" when
@@ -119,10 +121,11 @@ def assess(quantity: str, h, values, formal_order: float, singular: bool = False
     if singular:
         return result("singular", f"singular in the continuum (a load edge or re-entrant corner): it grows as the "
                                   f"mesh is refined and is never converged; {order_text}, spread {100 * spread:.2g} %")
-    if spread <= noise:
-        return result("converged", f"the three finest values agree within {100 * spread:.2f} %, inside the "
-                                   f"{100 * noise:.2f} % remeshing noise (two meshes of one size differ that much); "
-                                   "GCI column: that spread", extrapolated=f1, gci=spread)
+    if spread <= noise:  # changes below the noise are not resolved: the noise bounds what is known
+        return result("converged" if noise <= GCI_CONVERGED else "converging",
+                      f"the three finest values agree within {100 * spread:.2f} %, inside the "
+                      f"{100 * noise:.2f} % remeshing noise (two meshes of one size differ that much); "
+                      "GCI column: that noise", extrapolated=f1, gci=noise)
     if R < 0:
         if R > -1:  # oscillatory convergence: the swing shrinks under refinement
             u = 0.5 * spread
