@@ -99,8 +99,6 @@ def main() -> None:
                              "verdict": verdict, "gci_fine": gci_middle, "ladder": a.as_dict()})
         else:
             print(f"| {label} | {line} | | | | |")
-
-
     if args.json and measures:
         conditions = verdicts.conditions(case, middle)
         if args.mesh_size is not None:

@@ -153,9 +153,9 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     end = np.searchsorted(grid, lags + hi_span, side="right")
     value = np.full(lags.size, -np.inf)
     for n in np.unique(end - begin):
-        group = np.flatnonzero(end - begin == n)
         if n < 20:
             continue
+        group = np.flatnonzero(end - begin == n)
         for chunk in np.array_split(group, max(1, group.size * n // 500_000 + 1)):
             index = begin[chunk, None] + np.arange(n)
             scores = [_correlation(y[index], rate(s))

@@ -64,7 +64,8 @@ class FemurColumns:
         near = reach <= np.hypot(xy[:, 0], xy[:, 1]).max() + edge
         return origins, tri[near], lift
 
-    def _first_crossing(self, xy: np.ndarray) -> np.ndarray:
+    def outer_depth(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) depth ζ of the outer surface on every column [mm], inf where a column misses it."""
         origins, tri, lift = self._rays(xy, self.outer)
         first = np.concatenate([_crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri).min(axis=1)
                                 for i in range(0, len(origins), RAY_BATCH)]) if len(tri) else np.full(len(origins), np.inf)
@@ -72,19 +73,20 @@ class FemurColumns:
 
     def covers(self, xy: np.ndarray) -> np.ndarray:
         """(n,) True where a column meets the bone's outer surface."""
-        return np.isfinite(self._first_crossing(xy))
+        return np.isfinite(self.outer_depth(xy))
 
     def top(self, xy: np.ndarray) -> np.ndarray:
         """(n,) depth ζ of the outer surface on every column [mm]."""
-        first = self._first_crossing(xy)
+        first = self.outer_depth(xy)
         if not np.all(np.isfinite(first)):
             raise UserError(f"{np.sum(~np.isfinite(first))} columns of the local model miss the bone's outer surface: "
                             "the submodel radius reaches beyond the bone")
         return first
 
-    def bottom(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n,) depth of each column's bottom [mm] and (n,) True where it is a free surface."""
-        top = self.top(xy)
+    def bottom(self, xy: np.ndarray, top: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) depth of each column's bottom [mm] and (n,) True where it is a free surface
+        (``top``: the columns' :meth:`top`, when already cast)."""
+        top = self.top(xy) if top is None else top
         origins, tri, lift = self._rays(xy, self.boundary)
         gap = 1e-6 * lift
         exits = []
@@ -204,11 +206,12 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
     X, Y = np.meshgrid(axis, axis, indexing="ij")
     xy = np.column_stack([X.ravel(), Y.ravel()])
     inside = np.hypot(xy[:, 0], xy[:, 1]) <= reach
-    inside[inside] = columns.covers(xy[inside])  # past the bone's edge the average is over the columns on bone
     top = np.full(len(xy), np.nan)
+    top[inside] = columns.outer_depth(xy[inside])
+    inside &= np.isfinite(top)  # past the bone's edge the average is over the columns on bone
+    top[~inside] = np.nan
     exit_below = np.full(len(xy), np.nan)
-    top[inside] = columns.top(xy[inside])
-    bottom, free = columns.bottom(xy[inside])
+    bottom, free = columns.bottom(xy[inside], top[inside])
     exit_below[inside] = np.where(free, bottom - top[inside], columns.depth_cap_mm + 1.0)
     sigma = smoothing_mm / spacing_mm
 
