@@ -188,3 +188,18 @@ def test_cantilever_step_response_follows_its_analytic_modal_solution():
     exact = static - weights.sum() + _ramped_step(omega, times[1:], result.dt_s) @ weights
     np.testing.assert_allclose(w, exact, rtol=0, atol=0.006 * static)
     assert w.max() == pytest.approx(2 * static, rel=0.02)
+
+
+def test_a_start_in_quasi_static_equilibrium_has_no_initial_acceleration_unless_damped(model):
+    """From u0 = K⁻¹f0 the out-of-balance force M a0 = f0 − K u0 − C v0 is round-off without
+    damping (a0 = 0 exactly, no solve) and −C v0 with it."""
+    from femstudy.fe.transient import _initial_acceleration
+
+    fs, f, _ = model
+    free = fs.bc.free
+    u0 = solve_static(fs, f)[free]
+    v0 = 10.0 * u0
+    assert not np.any(_initial_acceleration(fs, f[free], u0, v0, (0.0, 0.0)))
+    damped = _initial_acceleration(fs, f[free], u0, v0, (5.0, 0.0))  # C = 5 M: a0 = −5 v0
+    # plus M⁻¹ of the solve's round-off force (measured 3e-4 of it here)
+    assert np.linalg.norm(damped + 5.0 * v0) / np.linalg.norm(5.0 * v0) < 1e-3

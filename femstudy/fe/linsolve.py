@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+import os
 import time
 import warnings
 
@@ -119,6 +120,9 @@ class PardisoFactor(Factor):
         self.upper = sp.triu(A, format="csr")
         self.upper.sort_indices()
         self._pardiso = pypardiso.PyPardisoSolver(mtype=2)
+        # pypardiso searches sys.prefix for MKL's runtime on every solver it makes (~0.3 s,
+        # four times in a study with the hole); once found, later solvers take it from here
+        os.environ.setdefault("PYPARDISO_MKL_RT", self._pardiso.libmkl._name)
         # iparm (1-based): 1 = use these settings, 2 = METIS nested dissection ordering,
         # 8 = no iterative refinement (with MKL's defaults every solve ran two refinement
         # steps, tripling its cost without improving the residual; Cholesky has no pivots to fix)
