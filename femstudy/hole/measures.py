@@ -82,30 +82,54 @@ def _tensor(voigt: np.ndarray, shear_factor: float) -> np.ndarray:
     return t
 
 
-def _measures(stress, D, region, points, distance, long_axis, context: dict, loadings) -> list[HoleMeasure]:
-    """Measures of stresses (n, k, 6) at points (n, 3) with element stiffnesses D (n, 6, 6)."""
-    if len(points) == 0:
-        return [HoleMeasure(name, **context, von_mises_MPa=np.nan, location_mm=(np.nan,) * 3,
-                            location_distance_mm=np.nan, max_principal_stress_MPa=np.nan,
-                            min_principal_stress_MPa=np.nan, max_principal_strain=np.nan,
-                            min_principal_strain=np.nan, strength_ratio=np.nan, points=0) for name in loadings]
+@dataclass(frozen=True)
+class _PointValues:
+    """Per point and loading (n, k): von Mises [MPa], extreme principal stresses [MPa] and
+    strains, and the strength ratio (femstudy.failure)."""
+
+    von_mises: np.ndarray
+    stress_max: np.ndarray
+    stress_min: np.ndarray
+    strain_max: np.ndarray
+    strain_min: np.ndarray
+    strength_ratio: np.ndarray
+
+
+def _point_values(stress, D, region, long_axis) -> _PointValues:
+    """The measured quantities of stresses (n, k, 6) at points with element stiffnesses D (n, 6, 6)."""
     strain = np.linalg.solve(D[:, None], stress[..., None])[..., 0]  # ε = D⁻¹σ, engineering shear
     principal_stress = np.linalg.eigvalsh(_tensor(stress, 1.0))
     principal_strain = np.linalg.eigvalsh(_tensor(strain, 0.5))
     vm = von_mises(stress)  # (n, k)
     cortical = region == CORTICAL
     ratio = np.where(cortical[:, None], cortical_strength_ratio(stress, long_axis), cancellous_strength_ratio(vm))
+    return _PointValues(vm, principal_stress[..., -1], principal_stress[..., 0], principal_strain[..., -1],
+                        principal_strain[..., 0], ratio)
+
+
+def _measures(values: _PointValues, points, distance, context: dict, loadings) -> list[HoleMeasure]:
+    """Per loading, the extremes of ``values`` over its points (n, 3) and where von Mises peaks."""
+    if len(points) == 0:
+        return [HoleMeasure(name, **context, von_mises_MPa=np.nan, location_mm=(np.nan,) * 3,
+                            location_distance_mm=np.nan, max_principal_stress_MPa=np.nan,
+                            min_principal_stress_MPa=np.nan, max_principal_strain=np.nan,
+                            min_principal_strain=np.nan, strength_ratio=np.nan, points=0) for name in loadings]
+    vm = values.von_mises
     out = []
     for j, name in enumerate(loadings):
         at = int(np.argmax(vm[:, j]))
         out.append(HoleMeasure(name, **context, von_mises_MPa=float(vm[at, j]), location_mm=tuple(map(float, points[at])),
                                location_distance_mm=float(distance[at]),
-                               max_principal_stress_MPa=float(principal_stress[:, j, -1].max()),
-                               min_principal_stress_MPa=float(principal_stress[:, j, 0].min()),
-                               max_principal_strain=float(principal_strain[:, j, -1].max()),
-                               min_principal_strain=float(principal_strain[:, j, 0].min()),
-                               strength_ratio=float(ratio[:, j].min()), points=len(points)))
+                               max_principal_stress_MPa=float(values.stress_max[:, j].max()),
+                               min_principal_stress_MPa=float(values.stress_min[:, j].min()),
+                               max_principal_strain=float(values.strain_max[:, j].max()),
+                               min_principal_strain=float(values.strain_min[:, j].min()),
+                               strength_ratio=float(values.strength_ratio[:, j].min()), points=len(points)))
     return out
+
+
+def _subset(values: _PointValues, chosen: np.ndarray) -> _PointValues:
+    return _PointValues(*(x[chosen] for x in values.__dict__.values()))
 
 
 def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",)
@@ -136,14 +160,15 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     for delta in distances_mm:
         samples = offset_samples(station, delta)
         probe = point_probe(system, samples.points)
-        stress_all = probe.stress(u)  # (n, k, 6)
-        for kind, chosen in (("distance", probe.inside), ("wall", probe.inside & samples.of("wall"))):
-            e = probe.element[chosen]
-            D = system.materials.D[system.materials.index[e]]
+        e = probe.element[probe.inside]
+        values = _point_values(probe.stress(u)[probe.inside], system.materials.D[system.materials.index[e]],
+                               system.region[e], long_axis)
+        points = probe.points[probe.inside]
+        for kind, chosen in (("distance", np.ones(len(e), bool)), ("wall", samples.of("wall")[probe.inside])):
             context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": kind,
                        "radius_mm": float(delta)}
-            out += _measures(stress_all[chosen], D, system.region[e], probe.points[chosen], np.full(len(e), float(delta)),
-                             long_axis, context, loadings)
+            out += _measures(_subset(values, chosen), points[chosen], np.full(int(chosen.sum()), float(delta)),
+                             context, loadings)
     return out
 
 
@@ -171,12 +196,14 @@ def exclusion_measures(system, station, u: np.ndarray, radii_mm, long_axis, excl
     stress = stress_projection(system, u).reshape(len(points), 6, -1).transpose(0, 2, 1)  # (n, k, 6)
     distance = hole_distance(station, points)
     element = np.repeat(np.arange(system.n_tets), nq)
-    D_all = system.materials.D[system.materials.index[element]]
+    counted = (distance > min(radii_mm, default=np.inf)) & ~np.asarray(excluded).ravel()
+    e = element[counted]
+    values = _point_values(stress[counted], system.materials.D[system.materials.index[e]], system.region[e], long_axis)
+    points, distance = points[counted], distance[counted]
     out = []
     for rho in radii_mm:
-        keep = (distance > rho) & ~np.asarray(excluded).ravel()
+        keep = distance > rho
         context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": "exclusion",
                    "radius_mm": float(rho)}
-        out += _measures(stress[keep], D_all[keep], system.region[element[keep]], points[keep], distance[keep],
-                         long_axis, context, loadings)
+        out += _measures(_subset(values, keep), points[keep], distance[keep], context, loadings)
     return out
