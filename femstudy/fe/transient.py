@@ -150,7 +150,8 @@ class TransientResult:
 
 def solve_transient(fs: FactorizedSystem, patterns, amplitudes, times_s, *, damping=(0.0, 0.0), u0=None, v0=None,
                     observer: Observer | None = None, scheme: str = "auto",
-                    rtol: float = INDICATOR_RTOL, accept_rtol: float = ACCEPT_RTOL) -> TransientResult:
+                    rtol: float = INDICATOR_RTOL, accept_rtol: float = ACCEPT_RTOL,
+                    static_shapes: np.ndarray | None = None) -> TransientResult:
     """March the clamped model through ``times_s`` (uniform steps) from (u0, v0) at times_s[0].
 
     Parameters
@@ -174,6 +175,8 @@ def solve_transient(fs: FactorizedSystem, patterns, amplitudes, times_s, *, damp
         "auto" marches in the reduced basis when it passes the check, else steps.
     rtol, accept_rtol : float
         Error indicator to enrich the basis towards, and the largest one accepted.
+    static_shapes : ndarray, (n_free, k), optional
+        K_ff⁻¹ of the patterns' free rows, when an earlier march already solved for them.
 
     Returns
     -------
@@ -193,7 +196,7 @@ def solve_transient(fs: FactorizedSystem, patterns, amplitudes, times_s, *, damp
     Pf = P[free]
     u = np.zeros(fs.n_free) if u0 is None else np.asarray(u0, float)[free]
     v = np.zeros(fs.n_free) if v0 is None else np.asarray(v0, float)[free]
-    static_shapes = fs.factor.solve(Pf)
+    static_shapes = fs.factor.solve(Pf) if static_shapes is None else np.asarray(static_shapes, float)
     common = dict(free=free, n_dofs=fs.system.n_dofs)
     if scheme == "auto" and fs.method != "amg":
         march = reduced_march(fs, Pf, A, dt, damping, (u, v), static_shapes, rtol)

@@ -271,7 +271,7 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         dynamics = Dynamics(scheme, vectors, indicator, tuple(float(f) for f in modes.frequency_Hz), check)
         clock["modal"] = time.perf_counter()
         if case.analysis.resolved:
-            dynamics = _resolved(case, loading, fs, patch, channels, damping, dynamics)
+            dynamics = _resolved(case, loading, fs, patch, shapes, channels, damping, dynamics)
     clock["resolved"] = time.perf_counter()
 
     summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
@@ -310,7 +310,7 @@ def _kept_steps(case: Case, n_steps: int, peak_step: int) -> set:
     return keep
 
 
-def _resolved(case, loading, fs, patch, channels, damping, dynamics: Dynamics) -> Dynamics:
+def _resolved(case, loading, fs, patch, shapes, channels, damping, dynamics: Dynamics) -> Dynamics:
     """A transient whose step resolves the lowest mode, through breakthrough, with the loads'
     per-flute oscillation and release; its peak deflection against the quasi-static one.
 
@@ -324,9 +324,9 @@ def _resolved(case, loading, fs, patch, channels, damping, dynamics: Dynamics) -
     log.info("resolved transient: %d steps of %.3g ms (%d per lowest period) from %.2f to %.2f s, per-flute "
              "oscillation and breakthrough release included", len(A) - 1, 1e3 * dt, case.analysis.steps_per_period,
              history.time_s[0], history.time_s[-1])
-    u0, v0 = fs.solve(patch.patterns @ np.column_stack([A[0], (A[1] - A[0]) / dt])).T
+    u0, v0 = fs.bc.expand(shapes @ np.column_stack([A[0], (A[1] - A[0]) / dt])).T  # shapes = K⁻¹P (free DOFs)
     march = fe.solve_transient(fs, patch.patterns, A, history.time_s, damping=damping, u0=u0, v0=v0,
-                               rtol=RESOLVED_RTOL)
+                               rtol=RESOLVED_RTOL, static_shapes=shapes)
     cheap = [ch for ch in channels if ch.name in ("deflection", "drill_point")]
     if march.scheme == "reduced":
         stiffness = march.basis.T @ (fs.K @ march.basis)
@@ -334,7 +334,7 @@ def _resolved(case, loading, fs, patch, channels, damping, dynamics: Dynamics) -
     else:  # stepped: nothing kept; measure the resolved run again through a recorder
         recorder = fe.StepRecorder(cheap, len(A))
         march = fe.solve_transient(fs, patch.patterns, A, history.time_s, damping=damping, u0=u0, v0=v0,
-                                   observer=recorder, scheme="stepping")
+                                   observer=recorder, scheme="stepping", static_shapes=shapes)
         resolved = recorder.history()
     Q, R = np.linalg.qr(march.static_shapes)  # the quasi-static response K⁻¹P a(t) = Q (R a(t))
     quasi = fe.reduced_history(cheap, fs.bc.expand(Q), R @ A.T, metric=Q.T @ (fs.K @ Q))
