@@ -121,3 +121,20 @@ def test_equal_finest_values_with_a_different_coarse_one_is_not_an_order():
     a = assess("q", [1.0, 1.5, 2.25], [1.0, 1.0, 1.2], formal_order=2)
     assert a.verdict == "not converging" and a.observed_order is None
     assert coarsest_meeting_target([1.0, 2.0], [0.0, 0.0], 0.0, 0.02) is None  # an unloaded bone
+
+
+def test_an_oscillatory_converged_deflection_recommends_a_size_against_the_finest_value():
+    """The TLEM 2.0 sweep 8, 6, 4.5 mm: the max deflection converges with a shrinking swing,
+    which gives no extrapolated value; the recommendation is then made against the finest
+    mesh's value (and says so), not refused."""
+    from femstudy.sweeps.report import convergence, convergence_markdown
+
+    rows = [{"order": 2, "refine": "site", "size_mm": s, "h_rep_mm": h, "max_deflection_mm": v}
+            for s, h, v in ((8, 2.257, 0.04319), (6, 1.846, 0.04299), (4.5, 1.587, 0.0431), (6, 1.888, 0.04305))]
+    quantities = {"max_deflection_mm": (1, 3, False, False)}
+    entry = convergence(rows, 0.02, quantities)["P2-site"]
+    assert entry["quantities"]["max_deflection_mm"]["verdict"] == "converged"
+    assert entry["quantities"]["max_deflection_mm"]["extrapolated"] is None
+    assert entry["recommended_reference"] == "finest" and entry["recommended_size_mm"] == 8
+    assert entry["recommended_error"] == pytest.approx(abs(0.04319 / 0.0431 - 1))
+    assert "the finest mesh's value" in convergence_markdown({"P2-site": entry}, 0.02)

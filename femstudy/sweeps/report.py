@@ -101,12 +101,16 @@ def convergence(rows: list[dict], target: float, quantities: dict = QUANTITIES) 
                            noise=noise.get(name, {}).get(quantity, 0.0))
                 entry["quantities"][quantity] = a.as_dict()
             deflection = entry["quantities"].get("max_deflection_mm")
-            if deflection and deflection["extrapolated"] is not None and deflection["verdict"] in ("converged", "converging"):
+            if deflection and deflection["verdict"] in ("converged", "converging"):
+                # against the extrapolated value, or, where the convergence gives none (oscillatory,
+                # within the noise), against the finest mesh's value
+                extrapolated = deflection["extrapolated"]
+                reference = extrapolated if extrapolated is not None else deflection["values"][0]
                 best = coarsest_meeting_target([r["size_mm"] for r in group],
-                                               [r["max_deflection_mm"] for r in group],
-                                               deflection["extrapolated"], target)
+                                               [r["max_deflection_mm"] for r in group], reference, target)
                 entry["recommended_size_mm"] = best[0] if best else None
                 entry["recommended_error"] = best[1] if best else None
+                entry["recommended_reference"] = "extrapolated" if extrapolated is not None else "finest"
         out[name] = entry
     return out
 
@@ -129,9 +133,16 @@ def convergence_markdown(assessment: dict, target: float) -> str:
             lines.append(f"| {q} | {hs} | {vals} | {100 * a['noise']:.2f} % | {order} | {ext} | {gci} | "
                          f"{a['verdict']}: {a['reason']} |")
         size = entry.get("recommended_size_mm")
-        lines += ["", f"Recommended global size: **{size:g} mm** (max deflection within "
-                      f"{100 * entry['recommended_error']:.2f} % of the extrapolated value; target {100 * target:g} %)."
-                  if size else f"No size in this sweep meets the {100 * target:g} % target on max deflection.", ""]
+        reference = {"extrapolated": "the extrapolated value", "finest": "the finest mesh's value (no "
+                     "extrapolation: the values converge without a monotone order)"}.get(entry.get("recommended_reference"))
+        if reference is None:
+            line = "No size is recommended: the max deflection has not converged on these meshes."
+        elif size:
+            line = (f"Recommended global size: **{size:g} mm** (max deflection within "
+                    f"{100 * entry['recommended_error']:.2f} % of {reference}; target {100 * target:g} %).")
+        else:
+            line = f"No size in this sweep meets the {100 * target:g} % target on max deflection against {reference}."
+        lines += ["", line, ""]
     return "\n".join(lines)
 
 
