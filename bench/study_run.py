@@ -55,9 +55,13 @@ def bare_static(size_mm: float, work: Path, cache: Path) -> list[str]:
 
 
 def variant(tree: Path, work: Path, name: str, edit) -> Path:
-    """A copy of the tree's case file with ``edit`` applied to its text, surface kept built-in."""
+    """A copy of the tree's case file with ``edit`` applied to its text, surface kept built-in,
+    its hole-convergence record (a path relative to the case) pointing at the tree's."""
+    case = tree / CASE
+    text = re.sub(r'(convergence\s*=\s*")([^"]+)"', lambda m: f'{m[1]}{(case.parent / m[2]).as_posix()}"',
+                  case.read_text())
     path = work / f"{name}.toml"
-    path.write_text(edit((tree / CASE).read_text()))
+    path.write_text(edit(text))
     return path
 
 

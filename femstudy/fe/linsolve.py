@@ -101,6 +101,10 @@ class Factor:
         self.solves += 1
         return x
 
+    def close(self) -> None:
+        """Release the factorisation where it lives outside Python (PARDISO: in MKL); the other
+        methods' memory goes when the factor is dropped. A closed factor cannot solve."""
+
     def describe(self) -> str:
         per = f", {self.solve_s / self.solves:.3f} s per solve" if self.solves else ""
         return f"{self.method}: {self.n:,} unknowns, set-up {self.setup_s:.2f} s{per}"

@@ -21,8 +21,8 @@ from typing import Callable
 
 import numpy as np
 
-#: Steps evaluated at once (bounds the points × steps temporaries).
-BLOCK_ENTRIES = 20_000_000
+#: Values evaluated at once, points × components × steps (bounds the temporaries: 40 MB each).
+BLOCK_ENTRIES = 5_000_000
 #: Histories up to this many steps are evaluated at every step; longer ones at about
 #: COARSE_STEPS evenly spaced steps, plus every step where the peak may lie.
 ALL_STEPS = 400

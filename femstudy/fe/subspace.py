@@ -37,7 +37,7 @@ class GrowingQR:
     directions and spoil Q's orthogonality)."""
 
     def __init__(self, n: int, capacity: int):
-        self.Q = np.empty((n, capacity))
+        self.Q = np.empty((n, capacity), order="F")  # column-major: memory only for the columns written
         self._R = np.zeros((capacity, capacity))
         self.rows = self.cols = 0
 

@@ -259,7 +259,7 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
         initial += [a for a in [_initial_acceleration(fs, P @ A[0], u, v, damping)] if np.any(a)]
     new = np.column_stack([static_shapes] + initial)
     capacity = new.shape[1] * max_blocks
-    V = np.empty((len(P), capacity))
+    V = np.empty((len(P), capacity), order="F")  # column-major: memory only for the columns written
     m, blocks = 0, []  # basis size; the column range of each block
     # the residual r = [P, MQ0, KQ0, MQ1, KQ1, …] z and K⁻¹r = [K⁻¹P, K⁻¹MQ0, Q0, …] z, QR-updated
     force, shift = GrowingQR(len(P), 2 * capacity + P.shape[1]), GrowingQR(len(P), 2 * capacity + P.shape[1])
