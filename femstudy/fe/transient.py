@@ -256,7 +256,8 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
     # the full march's space from the first step on
     initial = [x for x in (u, v) if np.any(x)]
     if initial:
-        initial += [a for a in [_initial_acceleration(fs, P @ A[0], u, v, damping)] if np.any(a)]
+        a0 = _initial_acceleration(fs, P @ A[0], u, v, damping)
+        initial += [a0] if np.any(a0) else []
     new = np.column_stack([static_shapes] + initial)
     capacity = new.shape[1] * max_blocks
     V = np.empty((len(P), capacity), order="F")  # column-major: memory only for the columns written

@@ -20,7 +20,7 @@ Stresses are the elements' own P2 fields at the points (σ = D B u_e), strains �
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -84,9 +84,12 @@ def _tensor(voigt: np.ndarray, shear_factor: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class _PointValues:
-    """Per point and loading (n, k): von Mises [MPa], extreme principal stresses [MPa] and
-    strains, and the strength ratio (femstudy.failure)."""
+    """Measured points (n, 3) [mm], their distance from the hole [mm] (n,), and per point and
+    loading (n, k): von Mises [MPa], extreme principal stresses [MPa] and strains, and the
+    strength ratio (femstudy.failure)."""
 
+    points: np.ndarray
+    distance: np.ndarray
     von_mises: np.ndarray
     stress_max: np.ndarray
     stress_min: np.ndarray
@@ -95,20 +98,25 @@ class _PointValues:
     strength_ratio: np.ndarray
 
 
-def _point_values(stress, D, region, long_axis) -> _PointValues:
-    """The measured quantities of stresses (n, k, 6) at points with element stiffnesses D (n, 6, 6)."""
+    def subset(self, chosen: np.ndarray) -> _PointValues:
+        return _PointValues(*(getattr(self, f.name)[chosen] for f in fields(self)))
+
+
+def _point_values(points, distance, stress, D, region, long_axis) -> _PointValues:
+    """The measured quantities of stresses (n, k, 6) at points (n, 3) with element stiffnesses D (n, 6, 6)."""
     strain = np.linalg.solve(D[:, None], stress[..., None])[..., 0]  # ε = D⁻¹σ, engineering shear
     principal_stress = np.linalg.eigvalsh(_tensor(stress, 1.0))
     principal_strain = np.linalg.eigvalsh(_tensor(strain, 0.5))
     vm = von_mises(stress)  # (n, k)
     cortical = region == CORTICAL
     ratio = np.where(cortical[:, None], cortical_strength_ratio(stress, long_axis), cancellous_strength_ratio(vm))
-    return _PointValues(vm, principal_stress[..., -1], principal_stress[..., 0], principal_strain[..., -1],
-                        principal_strain[..., 0], ratio)
+    return _PointValues(points, distance, vm, principal_stress[..., -1], principal_stress[..., 0],
+                        principal_strain[..., -1], principal_strain[..., 0], ratio)
 
 
-def _measures(values: _PointValues, points, distance, context: dict, loadings) -> list[HoleMeasure]:
-    """Per loading, the extremes of ``values`` over its points (n, 3) and where von Mises peaks."""
+def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure]:
+    """Per loading, the extremes of ``values`` over its points and where von Mises peaks."""
+    points, distance = values.points, values.distance
     if len(points) == 0:
         return [HoleMeasure(name, **context, von_mises_MPa=np.nan, location_mm=(np.nan,) * 3,
                             location_distance_mm=np.nan, max_principal_stress_MPa=np.nan,
@@ -126,10 +134,6 @@ def _measures(values: _PointValues, points, distance, context: dict, loadings) -
                                min_principal_strain=float(values.strain_min[:, j].min()),
                                strength_ratio=float(values.strength_ratio[:, j].min()), points=len(points)))
     return out
-
-
-def _subset(values: _PointValues, chosen: np.ndarray) -> _PointValues:
-    return _PointValues(*(x[chosen] for x in values.__dict__.values()))
 
 
 def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",)
@@ -161,14 +165,12 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
         samples = offset_samples(station, delta)
         probe = point_probe(system, samples.points)
         e = probe.element[probe.inside]
-        values = _point_values(probe.stress(u)[probe.inside], system.materials.D[system.materials.index[e]],
-                               system.region[e], long_axis)
-        points = probe.points[probe.inside]
+        values = _point_values(probe.points[probe.inside], np.full(len(e), float(delta)), probe.stress(u)[probe.inside],
+                               system.materials.D[system.materials.index[e]], system.region[e], long_axis)
         for kind, chosen in (("distance", np.ones(len(e), bool)), ("wall", samples.of("wall")[probe.inside])):
             context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": kind,
                        "radius_mm": float(delta)}
-            out += _measures(_subset(values, chosen), points[chosen], np.full(int(chosen.sum()), float(delta)),
-                             context, loadings)
+            out += _measures(values.subset(chosen), context, loadings)
     return out
 
 
@@ -198,12 +200,11 @@ def exclusion_measures(system, station, u: np.ndarray, radii_mm, long_axis, excl
     element = np.repeat(np.arange(system.n_tets), nq)
     counted = (distance > min(radii_mm, default=np.inf)) & ~np.asarray(excluded).ravel()
     e = element[counted]
-    values = _point_values(stress[counted], system.materials.D[system.materials.index[e]], system.region[e], long_axis)
-    points, distance = points[counted], distance[counted]
+    values = _point_values(points[counted], distance[counted], stress[counted],
+                           system.materials.D[system.materials.index[e]], system.region[e], long_axis)
     out = []
     for rho in radii_mm:
-        keep = distance > rho
         context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": "exclusion",
                    "radius_mm": float(rho)}
-        out += _measures(_subset(values, keep), points[keep], distance[keep], context, loadings)
+        out += _measures(values.subset(values.distance > rho), context, loadings)
     return out
