@@ -7,14 +7,15 @@ hole) at the case's stations for each hole refinement of ``--levels``, and the l
 von Mises stress over the stations at each distance from the hole wall and beyond each
 exclusion radius is assessed by femstudy.sweeps.convergence (formal order 2 for P2 stresses,
 mesh measure the hole model's wall element size 0.3 mm / refinement), against the placement
-noise: the middle level once more with the local mesh turned about the drill axis by half a
+noise: the case's own level once more with the local mesh turned about the drill axis by half a
 hole-circle step (the analogue of remeshing one size with TetWild: same resolution, other
 element positions). One heavy job: the finest default level has ~0.2M DOFs per station.
 
     PYTHONPATH=. python bench/hole_convergence.py cases/middiaphysis.toml [--mesh-size 16] [--levels 0.6667 1 1.5]
         [--json cases/convergence/middiaphysis-hole.json]
 
-``--json`` writes the verdicts for the middle level as a record a case names in
+``--json`` writes the verdicts for the case's own level (``loads.refinement``, one of the
+levels) as a record a case names in
 ``loads.convergence`` (femstudy/hole/verdicts.py), so that its failure margins use only
 converged measures.
 """
@@ -46,9 +47,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("case")
     parser.add_argument("--mesh-size", type=float, default=None, help="global element size [mm]")
-    parser.add_argument("--levels", type=float, nargs="+", default=[2 / 3, 1.0, 1.5], help="hole refinements")
+    parser.add_argument("--levels", type=float, nargs="+", default=[2 / 3, 1.0, 1.5],
+                        help="hole refinements (one of them the case's loads.refinement)")
     parser.add_argument("--cache", default=".femstudy-cache", help="mesh cache folder")
-    parser.add_argument("--json", type=Path, help="write the middle level's verdicts here (a loads.convergence record)")
+    parser.add_argument("--json", type=Path, help="write the case's level's verdicts here (a loads.convergence record)")
     args = parser.parse_args()
     case = load_case(args.case)
     start = time.perf_counter()
@@ -61,14 +63,17 @@ def main() -> None:
     print(f"{case.name}: global model {system.n_dofs:,} DOFs ({model.stats['n_tets']:,} tets), "
           f"{time.perf_counter() - start:.0f} s; cortex {model.site.cortical_thickness_mm:.2f} mm along the drill")
     base = case.loads.hole_options()
+    args.levels = [base.refinement if abs(level - base.refinement) <= 1e-3 else level for level in args.levels]
     results = []
     for level in args.levels:
         result = hole_stresses(case, model, system, fields, loading, dataclasses.replace(base, refinement=level))
         results.append(result)
         stations = "; ".join(f"tip {s.tip_depth_mm:.2f} mm: {s.dofs:,} DOFs, {s.seconds:.1f} s" for s in result.stations)
         print(f"refinement {level:.4g} (wall elements {result.wall_element_mm:.3g} mm): {stations}", flush=True)
-    # placement noise: the middle level once more, turned by half a hole-circle step about the axis
-    middle = sorted(args.levels)[len(args.levels) // 2]
+    # placement noise: the case's level once more, turned by half a hole-circle step about the axis
+    middle = min(args.levels, key=lambda level: abs(level - base.refinement))
+    if abs(middle - base.refinement) > 1e-3:
+        raise SystemExit(f"--levels must include the case's refinement {base.refinement:.4g}")
     step = 180.0 / Resolution(refinement=middle).scaled["n_wall"]
     turned = hole_stresses(case, model, system, fields, loading,
                            dataclasses.replace(base, refinement=middle, rotation_deg=step))
@@ -94,13 +99,13 @@ def main() -> None:
             ext = "—" if a.extrapolated is None else f"{a.extrapolated:.4g}"
             gci = "—" if a.gci_fine is None else f"{100 * a.gci_fine:.2f} %"
             print(f"| {label} | {line} | {p} | {ext} | {gci} | {a.verdict}: {a.reason} |")
-            verdict, gci_middle = verdicts.middle_level(a)
+            verdict, gci_middle = verdicts.at_level(a, reference.wall_element_mm)
             measures.append({"kind": kind, "radius_mm": radius, "values_MPa": values, "noise": noise,
                              "verdict": verdict, "gci_fine": gci_middle, "ladder": a.as_dict()})
         else:
             print(f"| {label} | {line} | | | | |")
     if args.json and measures:
-        conditions = verdicts.conditions(case, middle)
+        conditions = verdicts.conditions(case)
         if args.mesh_size is not None:
             conditions["mesh_size_mm"] = args.mesh_size
         record = {"command": "PYTHONPATH=. python bench/hole_convergence.py " + " ".join(sys.argv[1:]),

@@ -206,7 +206,7 @@ class LoadsSpec(_Section):
     headline_distance_mm: PositiveMM = 1.0
     exclusion_radii_mm: list[PositiveMM] = Field(default_factory=lambda: [0.5, 1.0, 2.0, 3.0, 4.0], min_length=1)
     exclusion_radius_mm: PositiveMM = 1.0
-    refinement: float = Field(1.0, gt=0, le=4)
+    refinement: float = Field(2 / 3, gt=0, le=4)
     submodel_radius_mm: float = Field(8.0, gt=2, le=50)
     depth_cap_mm: PositiveMM = 12.0
     smoothing_mm: float = Field(1.0, ge=0, le=5)

@@ -171,6 +171,28 @@ def test_refinement_scales_every_size():
     assert 2.5 < n[1] / n[0] < 4.5  # ≈ 1.5³ for a three-dimensional refinement
 
 
+def test_the_ligament_ahead_of_the_deepest_tip_has_thin_layers():
+    """The bone between the deepest station's cone and the bottom bends under the thrust: on the
+    axis it is crossed by layers no thicker than ``ligament_mm``; drilled through, no layer is
+    thinner than ``axial_mm`` needs."""
+    bottom = lambda xy: (np.full(len(xy), 6.1), np.ones(len(xy), bool))  # noqa: E731
+    flat = lambda xy: np.zeros(len(xy))  # noqa: E731
+    frame = HoleFrame.along([0, 0, 0], [0, 0, 1])
+    for refinement in (2 / 3, 1.0):
+        sizes = Resolution(refinement=refinement).scaled
+        hole = hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [1.8, 3.7, 5.5], flat, bottom,
+                         resolution=Resolution(refinement=refinement))
+        axis = np.linalg.norm(hole.frame.to_local(hole.mesh.points)[:, :2], axis=1) < 1e-12
+        depths = np.sort(hole.frame.to_local(hole.mesh.points[axis])[:, 2])
+        ligament = depths[(depths >= 5.5 - 1e-9) & (depths <= 6.1 + 1e-9)]
+        assert ligament[0] == pytest.approx(5.5) and ligament[-1] == pytest.approx(6.1)
+        assert np.diff(ligament).max() <= sizes["ligament_mm"] * 1.2, refinement
+        assert len(ligament) - 1 >= int(0.6 / sizes["ligament_mm"])
+    through = hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [3.0, 8.0], flat, bottom)
+    offsets = through.layer_offsets_mm[through.layer_offsets_mm >= 0]
+    assert np.diff(offsets).min() > Resolution().scaled["ligament_mm"] * 1.5
+
+
 def test_tilted_top_keeps_the_hole_exact():
     """A top surface tilted by 20° across the drill axis: the wall and cone stay exact, the
     top is followed, the mesh is still conforming."""

@@ -2,6 +2,7 @@
 and the stress/strain measures, against fields the elements represent exactly."""
 
 import numpy as np
+import pytest
 
 from hole_cases import E_MPA, NU, assemble_model, plate, station_system
 from femstudy.fe.materials import isotropic_stiffness
@@ -9,7 +10,9 @@ from femstudy.fe.post import von_mises
 from femstudy.hole import node_dofs, offset_samples
 from femstudy.hole.coupling import cut_boundary
 from femstudy.hole.measures import distance_measures, exclusion_measures
+from femstudy.errors import UserError
 from femstudy.hole.samples import hole_distance
+from femstudy.hole.study import HoleOptions, station_tips
 
 THICKNESS = 4.0
 TIPS = (2.5, 5.0)
@@ -76,3 +79,12 @@ def test_measures_of_a_uniform_strain():
     assert kinds == ["distance", "wall", "distance", "wall", "exclusion", "exclusion"]
     assert measures[0].points > measures[1].points  # the wall's points are a part of the set
     assert measures[4].points > measures[5].points  # fewer points outside the larger radius
+
+
+def test_the_deepest_tip_stops_a_ligament_short_of_the_bottom():
+    options = HoleOptions(stations=2, ligament_mm=0.5)
+    np.testing.assert_allclose(station_tips(options, 6.0, 6.08), [2.79, 5.58])  # the canal decides
+    np.testing.assert_allclose(station_tips(options, 5.0, 6.08), [2.5, 5.0])  # the drill stops first
+    np.testing.assert_allclose(station_tips(options, 5.0, np.inf), [2.5, 5.0])  # solid to the depth cap
+    with pytest.raises(UserError, match="no bone to drill"):
+        station_tips(options, 6.0, 0.4)

@@ -38,16 +38,18 @@ def test_a_record_made_under_other_conditions_admits_no_margin():
     assert verdicts.gate(MARGINS, verdicts.applicable(None, verdicts.conditions(CASE)))["governing_dynamic"] is None
 
 
-def test_the_middle_level_inherits_the_fine_verdict_scaled_by_r_to_the_p():
+def test_a_coarser_level_inherits_the_fine_verdict_scaled_by_r_to_the_p():
     h = (0.2, 0.3, 0.45)
     small = assess("s", h, [10.0 + 2.0 * x ** 2 for x in h], formal_order=2.0)  # exact order 2
-    verdict, gci = verdicts.middle_level(small)
+    verdict, gci = verdicts.at_level(small, 0.3)
     assert small.verdict == "converged" and verdict == "converged"
     assert gci == pytest.approx(small.gci_fine * 1.5 ** 2, rel=1e-9)
+    assert verdicts.at_level(small, 0.45)[1] == pytest.approx(small.gci_fine * 2.25 ** 2, rel=1e-9)
     large = assess("l", h, [10.0 + 6.0 * x ** 2 for x in h], formal_order=2.0)  # fine GCI 2.9 %, middle 6.6 %
     assert large.verdict == "converged" and large.gci_fine < 0.05
-    assert verdicts.middle_level(large)[0] == "converging"
-    assert verdicts.middle_level(assess("o", h, [10.0, 11.0, 10.0], formal_order=2.0))[1] is None
+    assert verdicts.at_level(large, 0.3)[0] == "converging"
+    assert verdicts.at_level(large, 0.2)[0] == "converged"
+    assert verdicts.at_level(assess("o", h, [10.0, 11.0, 10.0], formal_order=2.0), 0.3)[1] is None
 
 
 def test_bad_records_are_one_clear_error(tmp_path):

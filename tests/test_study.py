@@ -107,6 +107,10 @@ def test_hole_stresses_replace_the_patch_peak(p2_run):
         assert row["ratio_dynamic_to_static"] > 1  # the clogging loads exceed the static Allotta load
     assert summary["margins"]["basis"] == "hole"
     assert all(m["strength_ratio"] > 1 for m in summary["margins"]["dynamic"])
+    # the drilled depth (the cortex) reaches the canal: the deepest tip stops 0.5 mm short of the
+    # local model's own bottom on the axis, so the ligament does not depend on the global mesh
+    deepest = hole["stations"][-1]["tip_depth_mm"]
+    assert hole["axis_bottom_mm"] - deepest == pytest.approx(hole["options"]["ligament_mm"], abs=1e-12)
     text = (out / "report.md").read_text()
     assert "| von Mises 1 mm from the hole wall [MPa], not assessed |" in text
     assert "| max von Mises beyond 1 mm of the hole wall [MPa], not assessed |" in text

@@ -16,7 +16,10 @@ Geometry (local frame of :mod:`femstudy.hole.frame`: r from the axis, depth ζ a
   90°), and s_k is one of the layer offsets, so the station's hole (the cylinder r < R down
   to the cone ζ = s_k + c(r)) is exactly a union of cells. The offsets inside the cone
   region (s < 0) are those that put a layer's rim on a disk ring; the offsets s ≥ 0 are
-  graded from ``axial_mm`` at the top and at every station's corner to ``axial_max_mm``.
+  graded from ``axial_mm`` at the top and at every station's corner to ``axial_max_mm``,
+  and are ``ligament_mm`` apart through the bone ahead of the deepest tip on the axis (the
+  ligament between the deepest cone and the bottom, which bends under the thrust: one 0.4 mm
+  layer there made the stresses beside it converge at order ~1 instead of 2, docs/hole.md).
   A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it, on a
   station's cone too: a cone breaking through the bottom reaches it up to snap × the layer
   spacing early, rather than leave a sliver-thin sheet of bone (up to 0.18 mm with the
@@ -69,6 +72,8 @@ class Resolution:
     growth       : spacing growth per element away from the hole circle, the top and the stations
     axial_mm     : layer thickness at the top and at every station's cone [mm]
     axial_max_mm : largest layer thickness [mm]
+    ligament_mm  : layer thickness in the bone ahead of the deepest station's tip, from its cone
+                   down to the bottom on the axis (the ligament that bends under the thrust) [mm]
     snap         : fraction of a layer spacing within which a vertex moves onto the top or bottom
     """
 
@@ -78,20 +83,22 @@ class Resolution:
     growth: float = 1.4
     axial_mm: float = 0.4
     axial_max_mm: float = 0.8
+    ligament_mm: float = 0.1
     snap: float = 0.45
 
     def __post_init__(self) -> None:
         require(self.refinement > 0 and self.n_wall >= 8 and self.wall_mm > 0 and self.growth >= 1
-                and 0 < self.axial_mm <= self.axial_max_mm and 0 <= self.snap < 0.5,
+                and 0 < self.axial_mm <= self.axial_max_mm and 0 < self.ligament_mm <= self.axial_mm
+                and 0 <= self.snap < 0.5,
                 f"invalid hole-mesh resolution {self}")
 
     @property
     def scaled(self) -> dict:
-        """The sizes at this refinement: n_wall, wall_mm, growth, axial_mm, axial_max_mm."""
+        """The sizes at this refinement: n_wall, wall_mm, growth, axial_mm, axial_max_mm, ligament_mm."""
         f = self.refinement
         return {"n_wall": 4 * max(2, int(round(self.n_wall * f / 4))), "wall_mm": self.wall_mm / f,
                 "growth": self.growth ** (1.0 / f), "axial_mm": self.axial_mm / f,
-                "axial_max_mm": self.axial_max_mm / f}
+                "axial_max_mm": self.axial_max_mm / f, "ligament_mm": self.ligament_mm / f}
 
 
 @dataclass(frozen=True)
@@ -240,17 +247,25 @@ def _blend(r: np.ndarray, R: float) -> np.ndarray:
     return t * t * (3 - 2 * t)
 
 
-def _layer_offsets(disk_: Disk, cot: float, corners: np.ndarray, s_max: float, sizes: dict) -> np.ndarray:
+def _layer_offsets(disk_: Disk, cot: float, corners: np.ndarray, s_max: float, sizes: dict,
+                   ligament: tuple[float, float] | None) -> np.ndarray:
     """s_j: the cone-region offsets −(R − r_i) cot(β/2) of the rings inside the hole, then
-    offsets graded from 0 to s_max with the station corners among them."""
+    offsets graded from 0 to s_max with the station corners among them: ``axial_mm`` at 0 and
+    at the corners, ``ligament_mm`` over the offsets ``ligament`` = (a, b) of the bone ahead of
+    the deepest tip (None: drilled through), growing by ``growth`` per element away from them up
+    to ``axial_max_mm``."""
     R = disk_.ring_radii[disk_.hole_ring]
     negative = -(R - disk_.ring_radii[:disk_.hole_ring]) * cot
     refine_at = np.concatenate([[0.0], corners])
-    g, h0, h_max = sizes["growth"], sizes["axial_mm"], sizes["axial_max_mm"]
+    g, h0, h_max, h_lig = sizes["growth"], sizes["axial_mm"], sizes["axial_max_mm"], sizes["ligament_mm"]
 
     def size(s):
         distance = np.abs(s[:, None] - refine_at[None, :]).min(axis=1)
-        return np.minimum(h_max, h0 + (g - 1.0) * distance)
+        h = np.minimum(h_max, h0 + (g - 1.0) * distance)
+        if ligament is None:
+            return h
+        outside = np.maximum(np.maximum(ligament[0] - s, s - ligament[1]), 0.0)
+        return np.minimum(h, h_lig + (g - 1.0) * outside)
 
     fixed = np.unique(np.concatenate([[0.0, s_max], corners[(corners > 0) & (corners < s_max)]]))
     return np.concatenate([negative, graded_points(fixed, size)])
@@ -307,7 +322,9 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
                            f"{submodel_radius_mm} mm of the drill axis")
     w = _blend(d2.radius, R)
     lift = w * (T - T[0])
-    s = _layer_offsets(d2, cot, corners, float(np.max(B - lift)), sizes)
+    ahead = free[0] and tips.max() < B[0]  # bone ahead of the deepest tip on the axis (d2.xy[0])
+    ligament = (float(corners.max()), float(B[0]) - cone) if ahead else None
+    s = _layer_offsets(d2, cot, corners, float(np.max(B - lift)), sizes, ligament)
     c = np.maximum(R - d2.radius, 0.0) * cot
     Z = np.clip(s[None, :] + (c + lift)[:, None], T[:, None], B[:, None])
     spacing = np.diff(s)

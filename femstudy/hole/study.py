@@ -41,13 +41,17 @@ class HoleOptions:
     """How the hole models are built and measured (lengths in mm).
 
     stations : number of depth stations, tips at k/n of the deepest tip (k = 1..n)
-    ligament_mm : bone left ahead of the deepest tip along the axis (the deepest tip is the
-        drilled depth or the cortex along the axis, whichever is less, minus this: breakthrough
-        itself, a vanishing ligament, is a fracture problem, not a stress measure)
+    ligament_mm : least bone left ahead of the deepest tip along the axis: the deepest tip is the
+        drilled depth, but no deeper than this short of the local model's own bottom surface on
+        the axis (breakthrough itself, a vanishing ligament, is a fracture problem, not a stress
+        measure; measured on the local model's surfaces, the ligament is the same on every
+        global mesh)
     distances_mm : distances from the hole surface of the measures
     exclusion_radii_mm : exclusion radii of the sensitivity table; ``exclusion_radius_mm`` the quoted one
     headline_distance_mm : the distance whose von Mises stress a report quotes
-    refinement : :class:`femstudy.hole.mesh.Resolution` refinement (1: 0.3 mm at the wall)
+    refinement : :class:`femstudy.hole.mesh.Resolution` refinement; the default 2/3 has 0.45 mm
+        elements at the wall and 0.15 mm layers through the ligament ahead of the deepest tip
+        (docs/hole.md: its measures lie within 1 % of refinement 1.5 on both femurs)
     submodel_radius_mm, depth_cap_mm : extent of the local model (radius about the axis, depth below the top)
     cut_margin_mm : quadrature points this close to a cut-face node are not in the exclusion measures
     smoothing_mm : Gaussian smoothing length of the bone's top and bottom surfaces seen by the
@@ -63,7 +67,7 @@ class HoleOptions:
     exclusion_radii_mm: tuple = (0.5, 1.0, 2.0, 3.0, 4.0)
     exclusion_radius_mm: float = 1.0
     headline_distance_mm: float = 1.0
-    refinement: float = 1.0
+    refinement: float = 2 / 3
     submodel_radius_mm: float = 8.0
     depth_cap_mm: float = 12.0
     cut_margin_mm: float = 2.0
@@ -104,6 +108,8 @@ class HoleResult:
     measures : every :class:`HoleMeasure` (loading × station × distance or exclusion radius)
     static_load : (thrust_N, torque_Nmm) of the static loading
     mesh_seconds : time to build the column mesh [s]
+    axis_bottom_mm : depth of the local model's bottom surface on the drill axis below the entry
+        point [mm] (inf: solid bone to the depth cap); minus the deepest tip, the ligament
     """
 
     options: HoleOptions
@@ -111,6 +117,7 @@ class HoleResult:
     measures: tuple
     static_load: tuple
     mesh_seconds: float
+    axis_bottom_mm: float
 
     @property
     def wall_element_mm(self) -> float:
@@ -170,6 +177,7 @@ class HoleResult:
         return jsonable({"options": dict(self.options.__dict__), "stations": [dict(s.__dict__) for s in self.stations],
                          "static_load": {"thrust_N": self.static_load[0], "torque_Nmm": self.static_load[1]},
                          "mesh_s": self.mesh_seconds, "wall_element_mm": self.wall_element_mm,
+                         "axis_bottom_mm": self.axis_bottom_mm if np.isfinite(self.axis_bottom_mm) else None,
                          "distance": self.table("distance"), "wall": self.table("wall"),
                          "exclusion": self.table("exclusion"),
                          "margins": self.margins(),
@@ -194,8 +202,10 @@ def station_amplitudes(cond, tip_depth_mm: float, scale: float = 1.0) -> tuple[f
 
 
 def station_tips(options: HoleOptions, drilled_depth_mm: float, cortex_mm: float) -> np.ndarray:
-    """Tip depths [mm] of the stations: k/n of the deepest tip (:class:`HoleOptions`)."""
-    deepest = min(drilled_depth_mm, cortex_mm) - options.ligament_mm
+    """Tip depths [mm] of the stations: k/n of the deepest tip, min(drilled depth, cortex −
+    ligament) (:class:`HoleOptions`; ``cortex_mm`` the bottom's depth on the axis, inf where
+    the bone is solid to the local model's depth cap)."""
+    deepest = min(drilled_depth_mm, cortex_mm - options.ligament_mm)
     require(deepest > 0, f"no bone to drill: depth {drilled_depth_mm:g} mm, cortex {cortex_mm:g} mm, "
                          f"ligament {options.ligament_mm:g} mm")
     return deepest * np.arange(1, options.stations + 1) / options.stations
@@ -231,7 +241,6 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
     require(options.stations >= 1, f"the hole needs at least one station, got {options.stations}")
     cond = loading.conditions
     scale = case.drilling.load_scale
-    tips = station_tips(options, loading.depth_mm, model.site.cortical_thickness_mm)
     start = time.perf_counter()
     frame = HoleFrame.along(model.site.entry_point, model.site.direction)
     if options.rotation_deg:
@@ -245,6 +254,9 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         options = replace(options, submodel_radius_mm=radius)
     if options.smoothing_mm > 0:
         columns = smooth_columns(columns, options.submodel_radius_mm, options.smoothing_mm)
+    axis_bottom, axis_free = columns.bottom(np.zeros((1, 2)))
+    axis_bottom = float(axis_bottom[0]) if axis_free[0] else np.inf
+    tips = station_tips(options, loading.depth_mm, axis_bottom)
     hole = hole_mesh(frame, case.drill.diameter_mm, case.drill.point_angle_deg, options.submodel_radius_mm, tips,
                      columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement))
     mesh_seconds = time.perf_counter() - start
@@ -273,7 +285,7 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         runs.append(StationRun(k, float(tip), t, F_cut, T_cut, F_evac, T_evac, local.n_dofs, len(cut.dofs), seconds,
                                cut.moved_mm))
         log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
-    return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds)
+    return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds, axis_bottom)
 
 
 #: Azimuths and radial step [mm] of the probe for the largest local model that stays on the bone.

@@ -9,12 +9,12 @@ marks each margin row with its measure's verdict and quotes as the *governing* m
 smallest strength ratio among the rows whose verdict is "converged" (GCI ≤ 5 %, or within
 the noise); without a record, or one made under other conditions, no margin governs.
 
-The record speaks for one hole refinement, the middle of its three levels (the case's own,
-so that the study runs at the cost of that level): a measure judged "converged" on the ladder
-keeps that verdict at the middle level when its own error estimate, GCI_fine · r^p (the
-error scales as h^p in the asymptotic range, r the refinement ratio, p the order used), is
-still at most 5 %, or when all three levels agree within the placement noise
-(:func:`middle_level`).
+The record speaks for one hole refinement, one of its three levels (the case's own, so that
+the study runs at the cost of that level; the coarsest in the shipped records): a measure
+judged "converged" on the ladder keeps that verdict at that level when its own error
+estimate, GCI_fine · (h/h_fine)^p (the error scales as h^p in the asymptotic range, p the
+order used), is still at most 5 %, or when all three levels agree within the placement noise
+or converge by a shrinking oscillation, whose half range bounds every level (:func:`at_level`).
 
 Record format (JSON): ``{"conditions": {...}, "measures": [{"kind": "distance" | "wall" |
 "exclusion", "radius_mm": float, "verdict": str, "reason": str, "gci_fine": float | null,
@@ -43,15 +43,14 @@ def conditions(case, refinement: float | None = None) -> dict:
             "submodel_radius_mm": case.loads.submodel_radius_mm, "smoothing_mm": case.loads.smoothing_mm}
 
 
-def middle_level(assessment) -> tuple[str, float | None]:
-    """Verdict and GCI of the middle of the three levels behind ``assessment``
-    (:class:`femstudy.sweeps.convergence.Assessment`; see the module docstring)."""
+def at_level(assessment, h_mm: float) -> tuple[str, float | None]:
+    """Verdict and GCI of the level with mesh measure ``h_mm`` among the three behind
+    ``assessment`` (:class:`femstudy.sweeps.convergence.Assessment`; see the module docstring)."""
     if assessment.verdict != "converged":
         return assessment.verdict, None
-    if assessment.order_used is None:  # converged within the placement noise: the spread is the estimate
+    if assessment.order_used is None:  # within the noise or oscillatory: the spread is the estimate
         return "converged", assessment.gci_fine
-    h_fine, h_middle = assessment.h[:2]
-    gci = assessment.gci_fine * (h_middle / h_fine) ** assessment.order_used
+    gci = assessment.gci_fine * (h_mm / min(assessment.h)) ** assessment.order_used
     return ("converged" if gci <= GCI_CONVERGED else "converging"), gci
 
 

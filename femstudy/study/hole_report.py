@@ -37,6 +37,17 @@ def hole_table_rows(hole: dict) -> list[str]:
     return lines
 
 
+def _ligament(hole: dict) -> str:
+    """The bone left ahead of the deepest tip on the drill axis, as a sentence (empty when the
+    local model is solid bone to its depth cap)."""
+    bottom = hole.get("axis_bottom_mm")
+    if bottom is None:
+        return ""
+    deepest = hole["stations"][-1]["tip_depth_mm"]
+    return (f" On the drill axis the bone ends {bottom:.2f} mm below the entry point; the deepest tip leaves "
+            f"a {bottom - deepest:.2f} mm ligament.")
+
+
 def hole_section(hole: dict) -> list[str]:
     """The hole's stations, the stresses at each distance from the wall, the exclusion-radius
     sensitivity and the failure margins, as Markdown lines."""
@@ -48,7 +59,7 @@ def hole_section(hole: dict) -> list[str]:
              "evacuation torque as wall friction and its thrust on the bottom. Maxima over the stations and over "
              "every point at the stated distance from the hole surface (wall and cone; the last column: the points "
              "beside the cylindrical wall only). The convergence column is each measure's verdict under refinement "
-             f"of the hole model at this mesh (verdicts: {source}; docs/failure.md).", "",
+             f"of the hole model at this mesh (verdicts: {source}; docs/failure.md).{_ligament(hole)}", "",
              "| station | tip depth [mm] | time [s] | cutting thrust [N] | cutting torque [N·mm] | evacuation thrust [N] "
              "| evacuation torque [N·mm] | DOFs | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
     for s in hole["stations"]:
