@@ -61,9 +61,9 @@ def test_mesh_sweep_writes_table_and_convergence_assessment(case_file, mesh_cach
     assert quantities["max_von_mises_MPa"]["verdict"] == "singular"
     assert quantities["max_von_mises_MPa"]["h"][0] == pytest.approx(float(rows[2]["site_size_mm"]))
     # the hole model refines with the ladder; its quantities use its own wall element size as h
-    assert [float(r["hole_h_mm"]) for r in rows[:3]] == pytest.approx([0.6, 0.45, 0.3])
+    assert [float(r["hole_h_mm"]) for r in rows[:3]] == pytest.approx([0.9, 0.675, 0.45], rel=1e-5)  # 0.45 mm at 8 mm
     hole = quantities["hole_von_mises_1mm_MPa"]
-    assert hole["h"] == pytest.approx([0.3, 0.45, 0.6])
+    assert hole["h"] == pytest.approx([0.45, 0.675, 0.9], rel=1e-5)
     assert hole["verdict"] != "singular" and all(v > 0 for v in hole["values"])
     text = (out / "sweep.md").read_text()
     assert "GCI" in text and "![" in text
