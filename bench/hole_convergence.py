@@ -63,7 +63,10 @@ def main() -> None:
     print(f"{case.name}: global model {system.n_dofs:,} DOFs ({model.stats['n_tets']:,} tets), "
           f"{time.perf_counter() - start:.0f} s; cortex {model.site.cortical_thickness_mm:.2f} mm along the drill")
     base = case.loads.hole_options()
-    args.levels = [base.refinement if abs(level - base.refinement) <= 1e-3 else level for level in args.levels]
+    own = base.refinement  # the level the record speaks for; a level typed to 4 digits is taken as it
+    args.levels = [own if abs(level - own) <= 1e-3 else level for level in args.levels]
+    if own not in args.levels:
+        raise SystemExit(f"--levels must include the case's refinement {own:.4g}")
     results = []
     for level in args.levels:
         result = hole_stresses(case, model, system, fields, loading, dataclasses.replace(base, refinement=level))
@@ -71,14 +74,11 @@ def main() -> None:
         stations = "; ".join(f"tip {s.tip_depth_mm:.2f} mm: {s.dofs:,} DOFs, {s.seconds:.1f} s" for s in result.stations)
         print(f"refinement {level:.4g} (wall elements {result.wall_element_mm:.3g} mm): {stations}", flush=True)
     # placement noise: the case's level once more, turned by half a hole-circle step about the axis
-    middle = min(args.levels, key=lambda level: abs(level - base.refinement))
-    if abs(middle - base.refinement) > 1e-3:
-        raise SystemExit(f"--levels must include the case's refinement {base.refinement:.4g}")
-    step = 180.0 / Resolution(refinement=middle).scaled["n_wall"]
+    step = 180.0 / Resolution(refinement=own).scaled["n_wall"]
     turned = hole_stresses(case, model, system, fields, loading,
-                           dataclasses.replace(base, refinement=middle, rotation_deg=step))
-    reference = results[list(args.levels).index(middle)]
-    print(f"placement noise: refinement {middle:.4g} turned by {step:.3g} degrees")
+                           dataclasses.replace(base, refinement=own, rotation_deg=step))
+    reference = results[args.levels.index(own)]
+    print(f"placement noise: refinement {own:.4g} turned by {step:.3g} degrees")
     h = [r.wall_element_mm for r in results]
     print("\n| measure | von Mises dynamic [MPa], wall element " + ", ".join(f"{x:.3g}" for x in h)
           + " mm | observed order | extrapolated | GCI fine | verdict |")
@@ -99,9 +99,9 @@ def main() -> None:
             ext = "—" if a.extrapolated is None else f"{a.extrapolated:.4g}"
             gci = "—" if a.gci_fine is None else f"{100 * a.gci_fine:.2f} %"
             print(f"| {label} | {line} | {p} | {ext} | {gci} | {a.verdict}: {a.reason} |")
-            verdict, gci_middle = verdicts.at_level(a, reference.wall_element_mm)
+            verdict, gci_own = verdicts.at_level(a, reference.wall_element_mm)
             measures.append({"kind": kind, "radius_mm": radius, "values_MPa": values, "noise": noise,
-                             "verdict": verdict, "gci_fine": gci_middle, "ladder": a.as_dict()})
+                             "verdict": verdict, "gci_fine": gci_own, "ladder": a.as_dict()})
         else:
             print(f"| {label} | {line} | | | | |")
     if args.json and measures:

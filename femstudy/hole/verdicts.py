@@ -34,12 +34,12 @@ from femstudy.sweeps.convergence import GCI_CONVERGED
 MATCHED = ("surface", "mesh_size_mm", "site_size_mm", "order", "refinement", "submodel_radius_mm", "smoothing_mm")
 
 
-def conditions(case, refinement: float | None = None) -> dict:
-    """The conditions of ``case`` that a hole-convergence record is tied to (``refinement``:
-    the hole refinement the verdict speaks for, default the case's)."""
+def conditions(case) -> dict:
+    """The conditions of ``case`` that a hole-convergence record is tied to (the hole refinement
+    among them: the level the verdicts speak for)."""
     return {"surface": case.geometry.surface, "mesh_size_mm": case.mesh.size_mm,
             "site_size_mm": case.mesh.site_size_mm, "order": case.mesh.order,
-            "refinement": case.loads.refinement if refinement is None else refinement,
+            "refinement": case.loads.refinement,
             "submodel_radius_mm": case.loads.submodel_radius_mm, "smoothing_mm": case.loads.smoothing_mm}
 
 
