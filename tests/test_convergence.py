@@ -138,3 +138,13 @@ def test_an_oscillatory_converged_deflection_recommends_a_size_against_the_fines
     assert entry["recommended_reference"] == "finest" and entry["recommended_size_mm"] == 8
     assert entry["recommended_error"] == pytest.approx(abs(0.04319 / 0.0431 - 1))
     assert "the finest mesh's value" in convergence_markdown({"P2-site": entry}, 0.02)
+
+
+def test_an_order_equation_without_solution_is_no_order_not_an_overflow():
+    """Unequal refinement ratios (1.047, 1.104) and changes that barely shrink (P1 deflections of
+    a 32, 24, 16 mm sweep): the fixed-point iteration for the order diverges; that is no observed
+    order, and the sequence does not converge."""
+    h = (2.9781993911859557, 3.1189614610430145, 3.444852377043569)
+    values = (0.03015182647714923, 0.02975266638793374, 0.029303723398175368)
+    assert observed_order(values, h) is None
+    assert assess("max_deflection_mm", h, values, formal_order=2.0).verdict == "not converging"

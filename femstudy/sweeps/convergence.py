@@ -68,8 +68,14 @@ class Assessment:
         return asdict(self)
 
 
+#: Largest apparent order the fixed-point iteration follows; beyond it (the iteration diverges
+#: when the two refinement ratios differ and the changes barely shrink) the order is undefined.
+MAX_ORDER = 100.0
+
+
 def observed_order(phi, h, max_iter: int = 200, tol: float = 1e-12) -> float | None:
-    """Apparent order p from three solutions (fine to coarse), or None if undefined."""
+    """Apparent order p from three solutions (fine to coarse), or None if undefined (Celik et
+    al. 2008's fixed-point iteration for unequal refinement ratios)."""
     (f1, f2, f3), (h1, h2, h3) = phi, h
     e21, e32 = f2 - f1, f3 - f2
     if e21 == 0 or e32 == 0:
@@ -82,6 +88,8 @@ def observed_order(phi, h, max_iter: int = 200, tol: float = 1e-12) -> float | N
         if q_arg <= 0:
             return None
         new = abs(math.log(abs(e32 / e21)) + math.log(q_arg)) / math.log(r21)
+        if new > MAX_ORDER:
+            return None
         if abs(new - p) < tol:
             return new
         p = new
@@ -138,7 +146,8 @@ def assess(quantity: str, h, values, formal_order: float, singular: bool = False
         return result("not converging", f"diverging (R = {R:.3g} >= {bound:.3g}): the change does not shrink under "
                                         "refinement")
     if p is None:
-        return result("not converging", "no observed order: the two finest values are equal but the coarser one differs")
+        return result("not converging", "no observed order: the two finest values are equal but the coarser one "
+                                        "differs, or the order equation has no solution")
     if p < 0.25 * formal_order:
         return result("not converging", f"{order_text}: far below the formal order")
     used = min(max(p, 0.5), formal_order)
