@@ -117,3 +117,25 @@ def test_cone_of_the_station_is_sampled(p2):
     # the cone moved 0.5 mm along its normal (45°): ζ = s + (R − r) + 0.5 √2
     np.testing.assert_allclose(local[:, 2], station.corner_depth_mm + (RADIUS - r) * CONE / RADIUS + 0.5 * np.sqrt(2),
                                atol=1e-9)
+
+
+def test_boundary_points_lie_on_the_bone_surface_the_curve_leaves_through(p2):
+    """At δ = 2 mm below a 2.5 mm tip in a 4 mm plate the tip arc leaves through the bottom
+    face ζ = 4: the added points sit on that face (to the bisection's 2⁻¹² of a spacing), in
+    the bone, and on the curve; without them the deepest sample stops up to a spacing short."""
+    from femstudy.hole.probe import MeshLocator
+
+    station, system = p2
+    locator = MeshLocator(system)
+    samples = offset_samples(station, 2.0)
+    clipped = samples.with_boundary_points(locator.inside)
+    added = clipped.points[len(samples.points):]
+    zeta = station.hole.frame.to_local(added)[:, 2]
+    assert len(added) >= 8 and locator.inside(added).all()
+    bottom = zeta > 2.0
+    assert bottom.any()
+    np.testing.assert_allclose(zeta[bottom], THICKNESS, atol=samples.spacing_mm / 2 ** 12)
+    np.testing.assert_allclose(distance_to_hole(station.hole.frame.to_local(added), station.corner_depth_mm,
+                                                station.tip_depth_mm), 2.0, rtol=1e-9)
+    deepest_sample = station.hole.frame.to_local(samples.points[locator.inside(samples.points)])[:, 2].max()
+    assert THICKNESS - deepest_sample > samples.spacing_mm / 2 ** 10

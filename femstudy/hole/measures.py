@@ -8,7 +8,10 @@ exclusion zone around it.
   Mises stress and where it is, the largest and smallest principal stresses and strains, and
   the smallest strength ratio (:mod:`femstudy.failure`: Tsai–Wu for cortical bone about the
   long axis, von Mises against the mean strength for cancellous bone). Points outside the
-  bone (above the top, in the canal) are skipped.
+  bone (above the top, in the canal) are skipped; where the curve leaves the bone, the point
+  on the bone's surface is added (:meth:`~femstudy.hole.samples.OffsetSamples.with_boundary_points`),
+  so that a maximum on the canal under the tip or on the entry surface is taken on that
+  surface at every refinement.
 * **Outside an exclusion radius ρ** (:func:`exclusion_measures`): the same over the
   stiffness quadrature points of the station farther than ρ from the hole surface, excluding
   points within ``cut_margin_mm`` of a cut-face node (there the local solution is the
@@ -157,13 +160,14 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     -------
     >>> distance_measures(system, station, u, (0.5, 1.0), model.frame.up)  # doctest: +SKIP
     """
-    from femstudy.hole.probe import point_probe
+    from femstudy.hole.probe import MeshLocator, point_probe
 
     u = np.asarray(u, float).reshape(system.n_dofs, -1)
+    locator = MeshLocator(system)
     out = []
     for delta in distances_mm:
-        samples = offset_samples(station, delta)
-        probe = point_probe(system, samples.points)
+        samples = offset_samples(station, delta).with_boundary_points(locator.inside)
+        probe = point_probe(system, samples.points, locator=locator)
         e = probe.element[probe.inside]
         values = _point_values(probe.points[probe.inside], np.full(len(e), float(delta)), probe.stress(u)[probe.inside],
                                system.materials.D[system.materials.index[e]], system.region[e], long_axis)

@@ -1,9 +1,9 @@
 """Displacement and stress of a P1/P2 solution at arbitrary points.
 
-Each point is located in a tetrahedron of the system's mesh (VTK's cell locator through
-pyvista, checked, and where it misses by round-off on a shared face or the boundary, the
-element among the 64 with the nearest centroids in which the point's smallest barycentric
-coordinate is largest); a point counts as inside when that coordinate is ≥ −1e-9. With ξ the point's
+Each point is located in a tetrahedron of the system's mesh (:class:`MeshLocator`: VTK's cell
+locator through pyvista, checked, and where it misses by round-off on a shared face or the
+boundary, the element among the 64 with the nearest centroids in which the point's smallest
+barycentric coordinate is largest); a point counts as inside when that coordinate is ≥ −1e-9. With ξ the point's
 reference coordinates in that element, the displacement is u(x) = Σ_a N_a(ξ) u_a and the
 stress σ(x) = D B(ξ) u_e [MPa] — the element's own stress field evaluated at the point
 (discontinuous across elements; on a shared face one of the elements is used). Both are
@@ -82,33 +82,54 @@ def _reference_coordinates(system, element: np.ndarray, points: np.ndarray):
     return xi, invJ, np.minimum(1 - xi.sum(axis=1), xi.min(axis=1))
 
 
-def _locate(system, points: np.ndarray):
-    """Containing element (−1 if none) and reference coordinates of every point. VTK's locator
-    answers first (containing cell, else closest cell); a point it places just outside its
-    cell (between the tolerance and :data:`RETRY_WINDOW`: it happens on shared faces) is tried
-    in the 64 elements with the nearest centroids."""
-    import pyvista as pv
-    from scipy.spatial import cKDTree
+class MeshLocator:
+    """Finds the tetrahedron holding each point of a system's mesh; built once, asked many times.
 
-    mesh = system.mesh
-    grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.t.T}, mesh.p.T)
-    element = np.asarray(grid.find_containing_cell(points), dtype=np.int64)
-    element[element < 0] = np.asarray(grid.find_closest_cell(points[element < 0]), dtype=np.int64)
-    xi, invJ, worst = _reference_coordinates(system, element, points)
-    retry = np.flatnonzero((worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW))
-    if len(retry):
-        k = min(64, mesh.nelements)
-        _, near = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T).query(points[retry], k)
-        near = near.reshape(len(retry), k)
-        tries = _reference_coordinates(system, near.ravel(), np.repeat(points[retry], k, axis=0))[2]
-        best = np.argmax(tries.reshape(len(retry), k), axis=1)
-        element[retry] = near[np.arange(len(retry)), best]
-        xi[retry], invJ[retry], worst[retry] = _reference_coordinates(system, element[retry], points[retry])
-    element[worst < -BOUNDARY_TOLERANCE] = -1
-    return element, xi, invJ
+    VTK's static cell locator (through pyvista) answers first (containing cell, else closest
+    cell); a point it places just outside its cell (between the tolerance and
+    :data:`RETRY_WINDOW`: it happens on shared faces) is tried in the 64 elements with the
+    nearest centroids.
+    """
+
+    def __init__(self, system):
+        import pyvista as pv
+
+        self.system = system
+        self._grid = pv.UnstructuredGrid({pv.CellType.TETRA: system.mesh.t.T}, system.mesh.p.T)
+        self._centroids = None
+
+    def locate(self, points: np.ndarray):
+        """Containing element (−1 if none), reference coordinates ξ and J⁻¹ of every point (n, 3) [mm]."""
+        from scipy.spatial import cKDTree
+
+        system, mesh = self.system, self.system.mesh
+        element = np.asarray(self._grid.find_containing_cell(points), dtype=np.int64).reshape(-1)
+        missed = element < 0
+        if missed.any():
+            element[missed] = np.asarray(self._grid.find_closest_cell(points[missed]), dtype=np.int64)
+        xi, invJ, worst = _reference_coordinates(system, element, points)
+        retry = np.flatnonzero((worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW))
+        if len(retry):
+            if self._centroids is None:
+                self._centroids = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T)
+            k = min(64, mesh.nelements)
+            _, near = self._centroids.query(points[retry], k)
+            near = near.reshape(len(retry), k)
+            tries = _reference_coordinates(system, near.ravel(), np.repeat(points[retry], k, axis=0))[2]
+            best = np.argmax(tries.reshape(len(retry), k), axis=1)
+            element[retry] = near[np.arange(len(retry)), best]
+            xi[retry], invJ[retry], worst[retry] = _reference_coordinates(system, element[retry], points[retry])
+        element[worst < -BOUNDARY_TOLERANCE] = -1
+        return element, xi, invJ
+
+    def inside(self, points: np.ndarray) -> np.ndarray:
+        """(n,) True where a point (n, 3) [mm] lies in the mesh."""
+        points = np.atleast_2d(np.asarray(points, float))
+        return self.locate(points)[0] >= 0 if len(points) else np.zeros(0, bool)
 
 
-def point_probe(system, points: np.ndarray, element: np.ndarray | None = None) -> PointProbe:
+def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,
+                locator: MeshLocator | None = None) -> PointProbe:
     """Locate ``points`` in the system's mesh and build the point operators.
 
     Parameters
@@ -117,6 +138,7 @@ def point_probe(system, points: np.ndarray, element: np.ndarray | None = None) -
     points : (n, 3) points [mm]
     element : (n,) optional, the element of each point, used as given (its fields are
         extended polynomially to a point just outside it) instead of locating the points
+    locator : :class:`MeshLocator` of ``system``, to reuse one already built
 
     Returns
     -------
@@ -129,7 +151,7 @@ def point_probe(system, points: np.ndarray, element: np.ndarray | None = None) -
     """
     points = np.atleast_2d(np.asarray(points, float))
     if element is None:
-        element, xi, invJ = _locate(system, points)
+        element, xi, invJ = (locator or MeshLocator(system)).locate(points)
     else:
         element = np.asarray(element, dtype=np.int64)
         xi, invJ, _ = _reference_coordinates(system, element, points)

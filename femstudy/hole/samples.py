@@ -30,28 +30,114 @@ PARTS = ("wall", "corner", "cone", "tip")
 
 
 @dataclass(frozen=True)
+class OffsetCurve:
+    """The curve at δ from the hole in a half-plane through its axis, by arc length t [mm].
+
+    Pieces in order (wall, corner, cone, tip: :data:`PARTS`); ``breaks`` (5,) are the arc
+    lengths where they start and the curve ends. A straight piece runs from ``a`` to ``b``; an
+    arc has its centre in ``a`` and its radius, first and last angle in ``b``.
+    """
+
+    breaks: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    straight: np.ndarray
+
+    def part(self, t: np.ndarray) -> np.ndarray:
+        """Index into :data:`PARTS` of the piece holding each arc length t."""
+        return np.clip(np.searchsorted(self.breaks, t, side="right") - 1, 0, len(PARTS) - 1)
+
+    def rz(self, t: np.ndarray) -> np.ndarray:
+        """(n, 2) points (r, ζ) [mm] at arc lengths t (n,)."""
+        t = np.asarray(t, float)
+        k = self.part(t)
+        u = np.divide(t - self.breaks[k], self.breaks[k + 1] - self.breaks[k],
+                      out=np.zeros_like(t), where=self.breaks[k + 1] > self.breaks[k])
+        a, b = self.a[k], self.b[k]
+        line = a + u[:, None] * (b - a)
+        phi = b[:, 1] + u * (b[:, 2] - b[:, 1])
+        arc = a[:, :2] + b[:, :1] * np.column_stack([np.cos(phi), np.sin(phi)])
+        return np.where(self.straight[k][:, None], line[:, :2], arc)
+
+
+def offset_curve(station, distance_mm: float) -> OffsetCurve:
+    """The curve at ``distance_mm`` from the hole of a drilled station (module docstring)."""
+    hole = station.hole
+    R, l, s, delta = hole.radius_mm, hole.cone_length_mm, station.corner_depth_mm, float(distance_mm)
+    half = np.radians(hole.point_angle_deg) / 2
+    top = min(hole.hole_top_mm, s)
+    normal = np.array([np.cos(half), np.sin(half)])
+    corner, tip = np.array([R, s]), np.array([0.0, s + l])
+    a = np.array([[R + delta, top, 0.0], [R, s, 0.0], [*(corner + delta * normal), 0.0], [0.0, s + l, 0.0]])
+    b = np.array([[R + delta, s, 0.0], [delta, 0.0, half], [*(tip + delta * normal), 0.0], [delta, half, np.pi / 2]])
+    lengths = [s - top, delta * half, l / np.sin(half), delta * (np.pi / 2 - half)]
+    return OffsetCurve(np.concatenate([[0.0], np.cumsum(lengths)]), a, b, np.array([True, False, True, False]))
+
+
+def _swept(curve: OffsetCurve, frame, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """(n, 3) global points [mm] of the curve at arc lengths t swept to azimuths θ about the frame's axis."""
+    rz = curve.rz(t)
+    return frame.to_global(np.column_stack([rz[:, 0] * np.cos(theta), rz[:, 0] * np.sin(theta), rz[:, 1]]))
+
+
+@dataclass(frozen=True)
 class OffsetSamples:
-    """points (n, 3) [mm] at ``distance_mm`` from the hole surface; part (n,) index into :data:`PARTS`."""
+    """points (n, 3) [mm] at ``distance_mm`` from the hole surface; part (n,) index into
+    :data:`PARTS`; each point's arc length ``t`` [mm] along ``curve`` and azimuth ``theta``
+    [rad] about the axis of ``frame``."""
 
     distance_mm: float
     spacing_mm: float
     points: np.ndarray
     part: np.ndarray
+    t: np.ndarray
+    theta: np.ndarray
+    curve: OffsetCurve
+    frame: object
 
     def of(self, name: str) -> np.ndarray:
         """Mask of the points on one part of the curve."""
         return self.part == PARTS.index(name)
 
+    def at(self, t: np.ndarray, theta: np.ndarray) -> np.ndarray:
+        """(n, 3) global points [mm] at arc lengths t and azimuths θ."""
+        return _swept(self.curve, self.frame, t, theta)
 
-def _segment(a: np.ndarray, b: np.ndarray, spacing: float) -> np.ndarray:
-    n = max(1, int(np.ceil(np.linalg.norm(b - a) / spacing)))
-    return a + np.linspace(0.0, 1.0, n + 1)[:, None] * (b - a)
+    def with_boundary_points(self, inside, steps: int = 12) -> OffsetSamples:
+        """These samples and, on the azimuth of each, the points where the curve leaves the bone.
 
+        Between a sample (t_i, θ) and the curve's neighbouring stations (t_i±1, θ), one in
+        the bone and one not, the crossing is bisected ``steps`` times in t (to spacing/2^steps)
+        and its bone end added: a measure's maximum on the bone's own surface (the canal under
+        the tip, the entry surface) is then sampled there, not at the last sample before it,
+        which would move with the mesh of that surface.
 
-def _arc(centre: np.ndarray, radius: float, start: float, stop: float, spacing: float) -> np.ndarray:
-    n = max(1, int(np.ceil(radius * abs(stop - start) / spacing)))
-    phi = np.linspace(start, stop, n + 1)
-    return centre + radius * np.column_stack([np.cos(phi), np.sin(phi)])
+        Parameters
+        ----------
+        inside : callable, (n, 3) points → (n,) True where a point lies in the bone
+        steps : bisections per crossing
+        """
+        knots = np.unique(self.t)
+        i = np.searchsorted(knots, self.t)
+        here = inside(self.points)
+        lo, hi, theta = [], [], []
+        for step in (-1, 1):
+            has = (i + step >= 0) & (i + step < len(knots))
+            t_other = knots[np.clip(i + step, 0, len(knots) - 1)]
+            there = np.zeros(len(i), bool)
+            there[has] = inside(self.at(t_other[has], self.theta[has]))
+            cross = has & (here != there)
+            lo.append(np.where(here, self.t, t_other)[cross])
+            hi.append(np.where(here, t_other, self.t)[cross])
+            theta.append(self.theta[cross])
+        lo, hi, theta = map(np.concatenate, (lo, hi, theta))
+        for _ in range(steps):
+            mid = (lo + hi) / 2
+            ok = inside(self.at(mid, theta))
+            lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+        return OffsetSamples(self.distance_mm, self.spacing_mm, np.concatenate([self.points, self.at(lo, theta)]),
+                             np.concatenate([self.part, self.curve.part(lo)]), np.concatenate([self.t, lo]),
+                             np.concatenate([self.theta, theta]), self.curve, self.frame)
 
 
 def offset_samples(station, distance_mm: float, spacing_mm: float | None = None) -> OffsetSamples:
@@ -77,34 +163,17 @@ def offset_samples(station, distance_mm: float, spacing_mm: float | None = None)
     delta = float(distance_mm)
     spacing = 0.05 + delta / 20 if spacing_mm is None else float(spacing_mm)
     require(spacing > 0, f"the sample spacing must be positive, got {spacing} mm")
-    hole = station.hole
-    R, l, s = hole.radius_mm, hole.cone_length_mm, station.corner_depth_mm
-    half = np.radians(hole.point_angle_deg) / 2
-    top = hole.hole_top_mm
-
-    pieces, parts = [], []
-    if s > top:
-        pieces.append(_segment(np.array([R + delta, top]), np.array([R + delta, s]), spacing)[:-1])
-        parts.append(0)
-    corner = np.array([R, s])
-    pieces.append(_arc(corner, delta, 0.0, half, spacing)[:-1])
-    parts.append(1)
-    normal = np.array([np.cos(half), np.sin(half)])
-    tip = np.array([0.0, s + l])
-    pieces.append(_segment(corner + delta * normal, tip + delta * normal, spacing)[:-1])
-    parts.append(2)
-    pieces.append(_arc(tip, delta, half, np.pi / 2, spacing))
-    parts.append(3)
-    curve = np.concatenate(pieces)
-    curve_part = np.concatenate([np.full(len(p), k) for p, k in zip(pieces, parts)])
-
-    local, part = [], []
-    for (r, zeta), k in zip(curve, curve_part):
-        n = 1 if r < 1e-12 else max(8, int(np.ceil(2 * np.pi * r / spacing)))
-        theta = 2 * np.pi * np.arange(n) / n
-        local.append(np.column_stack([r * np.cos(theta), r * np.sin(theta), np.full(n, zeta)]))
-        part.append(np.full(n, k))
-    return OffsetSamples(delta, spacing, hole.frame.to_global(np.concatenate(local)), np.concatenate(part))
+    curve = offset_curve(station, delta)
+    t = [np.linspace(t0, t1, max(1, int(np.ceil((t1 - t0) / spacing))) + 1)[:-1]
+         for t0, t1 in zip(curve.breaks[:-1], curve.breaks[1:]) if t1 > t0]
+    t = np.concatenate(t + [curve.breaks[-1:]])
+    r = curve.rz(t)[:, 0]
+    count = np.where(r < 1e-12, 1, np.maximum(8, np.ceil(2 * np.pi * r / spacing).astype(int)))
+    t_points = np.repeat(t, count)
+    theta = np.concatenate([2 * np.pi * np.arange(n) / n for n in count])
+    frame = station.hole.frame
+    return OffsetSamples(delta, spacing, _swept(curve, frame, t_points, theta), curve.part(t_points), t_points, theta,
+                         curve, frame)
 
 
 def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
