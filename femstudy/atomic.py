@@ -57,13 +57,13 @@ def atomic_folder(target: str | os.PathLike) -> Iterator[Path]:
     tmp.chmod(0o777 & ~_umask())
     try:
         yield tmp
-        if target.exists():
+        try:
+            os.replace(tmp, target)
+        except OSError:  # target exists (or appeared meanwhile: another process stored it) and is not empty
             old = target.with_name(f".{target.name}.old-{os.getpid()}")
             os.replace(target, old)
             os.replace(tmp, target)
             shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, target)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

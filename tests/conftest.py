@@ -49,6 +49,11 @@ def bone_library(tmp_path, monkeypatch):
 
 
 @pytest.fixture(scope="session")
-def mesh_cache(tmp_path_factory):
-    """One mesh cache for the whole test session, so the built-in femur is meshed once."""
-    return tmp_path_factory.mktemp("mesh-cache")
+def mesh_cache(tmp_path_factory, worker_id):
+    """One mesh cache for the whole test session, shared by the xdist workers (entries are
+    written under a temporary name and renamed into place), so a femur is meshed once per run
+    rather than once per worker."""
+    root = tmp_path_factory.getbasetemp()
+    folder = (root if worker_id == "master" else root.parent) / "mesh-cache"
+    folder.mkdir(exist_ok=True)
+    return folder
