@@ -191,6 +191,16 @@ def test_the_ligament_ahead_of_the_deepest_tip_has_thin_layers():
     through = hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [3.0, 8.0], flat, bottom)
     offsets = through.layer_offsets_mm[through.layer_offsets_mm >= 0]
     assert np.diff(offsets).min() > Resolution().scaled["ligament_mm"] * 1.5
+    # 6 mm of bone ahead of the tip is no thin ligament: the thin layers stop 1 mm ahead of it
+    deep = lambda xy: (np.full(len(xy), 9.0), np.ones(len(xy), bool))  # noqa: E731
+    thick = hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [1.5, 3.0], flat, deep)
+    axis = np.linalg.norm(thick.frame.to_local(thick.mesh.points)[:, :2], axis=1) < 1e-12
+    depths = np.sort(thick.frame.to_local(thick.mesh.points[axis])[:, 2])
+    spacing = np.diff(depths)
+    ahead = (depths[:-1] >= 3.0 - 1e-9) & (depths[1:] <= 4.0 + 1e-9)
+    assert spacing[ahead].max() <= Resolution().ligament_mm * 1.2
+    assert spacing[depths[:-1] >= 4.5].min() > 2 * Resolution().ligament_mm
+    assert len(depths) < 3.0 / Resolution().ligament_mm + 25
 
 
 def test_tilted_top_keeps_the_hole_exact():

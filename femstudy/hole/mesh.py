@@ -19,7 +19,8 @@ Geometry (local frame of :mod:`femstudy.hole.frame`: r from the axis, depth ζ a
   graded from ``axial_mm`` at the top and at every station's corner to ``axial_max_mm``,
   and are ``ligament_mm`` apart through the bone ahead of the deepest tip on the axis (the
   ligament between the deepest cone and the bottom, which bends under the thrust: one 0.4 mm
-  layer there made the stresses beside it converge at order ~1 instead of 2, docs/hole.md).
+  layer there made the stresses beside it converge at order ~1 instead of 2, docs/hole.md),
+  at most ``ligament_depth_mm`` ahead of it.
   A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it, on a
   station's cone too: a cone breaking through the bottom reaches it up to snap × the layer
   spacing early, rather than leave a sliver-thin sheet of bone (up to 0.18 mm with the
@@ -74,6 +75,9 @@ class Resolution:
     axial_max_mm : largest layer thickness [mm]
     ligament_mm  : layer thickness in the bone ahead of the deepest station's tip, from its cone
                    down to the bottom on the axis (the ligament that bends under the thrust) [mm]
+    ligament_depth_mm : how far ahead of the deepest tip the ``ligament_mm`` layers reach at most,
+                   not scaled by the refinement: bone thicker than that ahead of the tip is no thin
+                   ligament, and beyond it the layers grow by ``growth`` [mm]
     snap         : fraction of a layer spacing within which a vertex moves onto the top or bottom
     """
 
@@ -84,12 +88,13 @@ class Resolution:
     axial_mm: float = 0.4
     axial_max_mm: float = 0.8
     ligament_mm: float = 0.1
+    ligament_depth_mm: float = 1.0
     snap: float = 0.45
 
     def __post_init__(self) -> None:
         require(self.refinement > 0 and self.n_wall >= 8 and self.wall_mm > 0 and self.growth >= 1
                 and 0 < self.axial_mm <= self.axial_max_mm and 0 < self.ligament_mm <= self.axial_mm
-                and 0 <= self.snap < 0.5,
+                and self.ligament_depth_mm > 0 and 0 <= self.snap < 0.5,
                 f"invalid hole-mesh resolution {self}")
 
     @property
@@ -323,7 +328,8 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     w = _blend(d2.radius, R)
     lift = w * (T - T[0])
     ahead = free[0] and tips.max() < B[0]  # bone ahead of the deepest tip on the axis (d2.xy[0])
-    ligament = (float(corners.max()), float(B[0]) - cone) if ahead else None
+    ligament = ((float(corners.max()), min(float(B[0]) - cone, float(corners.max()) + resolution.ligament_depth_mm))
+                if ahead else None)
     s = _layer_offsets(d2, cot, corners, float(np.max(B - lift)), sizes, ligament)
     c = np.maximum(R - d2.radius, 0.0) * cot
     Z = np.clip(s[None, :] + (c + lift)[:, None], T[:, None], B[:, None])
