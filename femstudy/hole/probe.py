@@ -123,9 +123,23 @@ class MeshLocator:
         return element, xi, invJ
 
     def inside(self, points: np.ndarray) -> np.ndarray:
-        """(n,) True where a point (n, 3) [mm] lies in the mesh."""
+        """(n,) True where a point (n, 3) [mm] lies in the mesh, as :meth:`locate` decides, but
+        quicker for the many points of a bisection: a point VTK finds in no cell is outside
+        without :meth:`locate`'s closest-cell search (which only rescues points on the
+        boundary to round-off), and only the points VTK's tolerance places ambiguously (just
+        outside the cell it names) are located in full."""
         points = np.atleast_2d(np.asarray(points, float))
-        return self.locate(points)[0] >= 0 if len(points) else np.zeros(0, bool)
+        element = np.asarray(self._grid.find_containing_cell(points), dtype=np.int64).reshape(-1)
+        found = np.flatnonzero(element >= 0)
+        out = np.zeros(len(points), bool)
+        if not len(found):
+            return out
+        worst = _reference_coordinates(self.system, element[found], points[found])[2]
+        out[found] = worst >= -BOUNDARY_TOLERANCE
+        unsure = found[(worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW)]
+        if len(unsure):
+            out[unsure] = self.locate(points[unsure])[0] >= 0
+        return out
 
 
 def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,
