@@ -98,16 +98,23 @@ class MeshLocator:
         self._grid = pv.UnstructuredGrid({pv.CellType.TETRA: system.mesh.t.T}, system.mesh.p.T)
         self._centroids = None
 
-    def locate(self, points: np.ndarray):
-        """Containing element (−1 if none), reference coordinates ξ and J⁻¹ of every point (n, 3) [mm]."""
+    def locate(self, points: np.ndarray, search_missed: bool = True):
+        """Containing element (−1 if none), reference coordinates ξ and J⁻¹ of every point (n, 3) [mm]
+        (NaN where no element was tried). ``search_missed=False`` skips the closest-cell search for
+        the points VTK finds in no cell, which only rescues points on the boundary to round-off:
+        they are then outside (the quick test of :meth:`inside`)."""
         from scipy.spatial import cKDTree
 
         system, mesh = self.system, self.system.mesh
         element = np.asarray(self._grid.find_containing_cell(points), dtype=np.int64).reshape(-1)
         missed = element < 0
-        if missed.any():
+        if search_missed and missed.any():
             element[missed] = np.asarray(self._grid.find_closest_cell(points[missed]), dtype=np.int64)
-        xi, invJ, worst = _reference_coordinates(system, element, points)
+        n = len(element)
+        xi, invJ, worst = np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan), np.full(n, -np.inf)
+        tried = np.flatnonzero(element >= 0)
+        if len(tried):
+            xi[tried], invJ[tried], worst[tried] = _reference_coordinates(system, element[tried], points[tried])
         retry = np.flatnonzero((worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW))
         if len(retry):
             if self._centroids is None:
@@ -123,23 +130,11 @@ class MeshLocator:
         return element, xi, invJ
 
     def inside(self, points: np.ndarray) -> np.ndarray:
-        """(n,) True where a point (n, 3) [mm] lies in the mesh, as :meth:`locate` decides, but
-        quicker for the many points of a bisection: a point VTK finds in no cell is outside
-        without :meth:`locate`'s closest-cell search (which only rescues points on the
-        boundary to round-off), and only the points VTK's tolerance places ambiguously (just
-        outside the cell it names) are located in full."""
+        """(n,) True where a point (n, 3) [mm] lies in the mesh: :meth:`locate` without its
+        closest-cell search, quicker for the many points of a bisection. VTK's containing cell
+        alone is not enough: its tolerance accepts points just outside the mesh."""
         points = np.atleast_2d(np.asarray(points, float))
-        element = np.asarray(self._grid.find_containing_cell(points), dtype=np.int64).reshape(-1)
-        found = np.flatnonzero(element >= 0)
-        out = np.zeros(len(points), bool)
-        if not len(found):
-            return out
-        worst = _reference_coordinates(self.system, element[found], points[found])[2]
-        out[found] = worst >= -BOUNDARY_TOLERANCE
-        unsure = found[(worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW)]
-        if len(unsure):
-            out[unsure] = self.locate(points[unsure])[0] >= 0
-        return out
+        return self.locate(points, search_missed=False)[0] >= 0
 
 
 def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,
