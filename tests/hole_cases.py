@@ -38,6 +38,28 @@ def plate(thickness: float, tips: tuple, refinement: float = 1.0, submodel_radiu
                      resolution=Resolution(refinement=refinement, n_wall=n_wall))
 
 
+def inner_cortex(xy: np.ndarray) -> np.ndarray:
+    """ζ_I [mm] of the layered plate's cortical–cancellous interface, gently tilted and curved."""
+    return 3.3 + 0.08 * xy[:, 0] + 0.03 * xy[:, 1] ** 2
+
+
+@lru_cache(maxsize=None)
+def layered_plate(follow: bool = True, refinement: float = 1.0):
+    """An 8 mm plate around a hole drilled along +z to tips 2, 4, 6 mm: cortex above
+    :func:`inner_cortex`, cancellous bone below; ``follow``: the mesh's layers follow it."""
+    from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL
+
+    frame = HoleFrame.along([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
+
+    def region(points):
+        local = frame.to_local(points)
+        return np.where(local[:, 2] < inner_cortex(local[:, :2]), CORTICAL, CANCELLOUS_DISTAL)
+
+    return hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [2.0, 4.0, 6.0], top=lambda xy: np.zeros(len(xy)),
+                     bottom=lambda xy: (np.full(len(xy), 8.0), np.ones(len(xy), bool)), region=region,
+                     resolution=Resolution(refinement=refinement), interface=inner_cortex if follow else None)
+
+
 @lru_cache(maxsize=None)
 def station_system(thickness: float, tips: tuple, k: int, order: int, refinement: float = 1.0,
                    submodel_radius: float = 8.0):

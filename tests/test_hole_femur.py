@@ -133,3 +133,39 @@ def test_a_narrow_bone_shrinks_the_local_model_to_what_it_surrounds():
     assert smooth.top(np.array([[0.0, 2.0]]))[0] == pytest.approx(R_OUT - np.sqrt(R_OUT ** 2 - x[0] ** 2), abs=0.05)
     with pytest.raises(UserError, match="too narrow for a local model"):
         fitting_radius(columns, 16.0, 14.5)
+
+
+def test_the_inner_cortical_surface_is_smoothed_and_followed_by_the_local_mesh():
+    """A tube whose outer 2.5 mm is cortex over cancellous bone (inner surface r = 11.5 mm):
+    the smoothed interface is the Gaussian blur of its depth profile R_OUT − √(11.5² − x²)
+    (as for the top and bottom above), the local mesh has a vertex on it on every column on
+    and outside the hole circle, and near it a cell's region is the side of it its centroid is
+    on, however the global mesh's cells straddle it."""
+    from femstudy.hole.femur import smooth_columns
+
+    mesh = tube_mesh(60.0, R_OUT, R_IN, 3, N_AROUND, 30)  # radial nodes at 6.5, 9, 11.5, 14 mm
+    centroid = mesh.points[mesh.tets].mean(axis=1)
+    split = 11.5
+    region = np.where(np.hypot(centroid[:, 0], centroid[:, 1]) > split, CORTICAL, CANCELLOUS_DISTAL).astype(np.int8)
+    mesh = TetMesh(mesh.points, mesh.tets, region)
+    boundary = boundary_faces(mesh)
+    outer = boundary[np.hypot(*mesh.points[boundary].mean(axis=1)[:, :2].T) > (R_OUT + R_IN) / 2]
+    sigma = 0.6
+    smooth = smooth_columns(femur_columns(mesh, outer, frame(), depth_cap_mm=20.0), 5.0, sigma)
+    assert smooth.inner_code == CANCELLOUS_DISTAL
+    xy = np.random.default_rng(7).uniform(-3.0, 3.0, (30, 2))
+    x = lateral_offset(smooth.raw, xy)
+    curvature = split ** 2 / (split ** 2 - x ** 2) ** 1.5
+    expected = R_OUT - np.sqrt(split ** 2 - x ** 2) + sigma ** 2 / 2 * curvature
+    np.testing.assert_allclose(smooth.interface(xy), expected, atol=0.005 + 0.1 * sigma ** 2 / 2 * curvature.max())
+
+    hole = hole_mesh(smooth.frame, DIAMETER, POINT_ANGLE, 5.0, [2.0, 4.0], smooth.top, smooth.bottom, smooth.region,
+                     interface=smooth.interface)
+    assert signed_volumes(hole.mesh.points, hole.mesh.tets).min() > 0
+    local = hole.frame.to_local(hole.mesh.points)
+    on = np.abs(local[:, 2] - smooth.interface(local[:, :2])) < 1e-9
+    beside = np.flatnonzero(hole.disk.radius >= RADIUS * (1 - 1e-12))
+    assert np.all(np.isin(beside, hole.point_column[on]))
+    centre = hole.frame.to_local(hole.mesh.points[hole.mesh.tets].mean(axis=1))
+    above = centre[:, 2] < smooth.interface(centre[:, :2])
+    np.testing.assert_array_equal(hole.mesh.region == CORTICAL, above)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hole_cases import CONE, DIAMETER, POINT_ANGLE, RADIUS, plate
+from hole_cases import CONE, DIAMETER, POINT_ANGLE, RADIUS, inner_cortex, layered_plate, plate
 from femstudy.errors import UserError
 from femstudy.hole import HoleFrame, Resolution, hole_mesh
 from femstudy.hole.prisms import split_prisms
@@ -233,3 +233,33 @@ def test_bad_inputs_are_user_errors():
         hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [2.0], flat, lambda xy: (np.zeros(len(xy)), np.ones(len(xy), bool)))
     with pytest.raises(UserError, match="station 7"):
         plate(THICKNESS, TIPS).at_station(7)
+
+
+def test_a_material_interface_is_followed_by_element_faces_beside_the_hole():
+    """A cortex whose inner surface ζ_I = 3.3 + 0.08 x + 0.03 y² lies between two station
+    corners (0.65 and 2.65 mm, tips 2, 4, 6 mm): on and outside the hole circle every column
+    has a vertex on it, so the faces between cortical and cancellous cells lie on it there;
+    the stations' holes are the same as without it, to round-off."""
+    from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL
+
+    plain, hole = layered_plate(follow=False), layered_plate()
+    assert signed_volumes(hole.mesh.points, hole.mesh.tets).min() > 0
+    local = hole.frame.to_local(hole.mesh.points)
+    on = np.abs(local[:, 2] - inner_cortex(local[:, :2])) < 1e-9
+    beside = hole.disk.radius >= RADIUS * (1 - 1e-12)
+    assert np.all(np.isin(np.flatnonzero(beside), hole.point_column[on]))  # every column beside the hole
+    tets, region = hole.mesh.tets, hole.mesh.region
+    owner = np.tile(np.arange(len(tets)), 4)
+    key, inverse = np.unique(faces_of(tets), axis=0, return_inverse=True)
+    cortical = np.bincount(inverse.ravel(), region[owner] == CORTICAL, len(key))
+    cancellous = np.bincount(inverse.ravel(), region[owner] == CANCELLOUS_DISTAL, len(key))
+    interface = key[(cortical == 1) & (cancellous == 1)]
+    outside = hole.disk.radius[hole.point_column[interface]].min(axis=1) >= RADIUS * (1 - 1e-12)
+    assert outside.sum() > 100 and on[interface[outside]].all()
+    plain_local = plain.frame.to_local(plain.mesh.points)  # without it: a staircase
+    assert not np.isclose(plain_local[:, 2], inner_cortex(plain_local[:, :2]), atol=1e-3).any()
+    for k, tip in enumerate((2.0, 4.0, 6.0)):
+        assert hole.removed_volume_mm3(k) == pytest.approx(plain.removed_volume_mm3(k), rel=1e-12)
+        cone = hole.at_station(k).faces["hole_bottom"]
+        r = np.hypot(local[cone, 0], local[cone, 1])
+        np.testing.assert_allclose(local[cone, 2], tip - CONE + (RADIUS - r) * CONE / RADIUS, atol=1e-9)

@@ -128,14 +128,39 @@ def test_boundary_points_lie_on_the_bone_surface_the_curve_leaves_through(p2):
     station, system = p2
     locator = MeshLocator(system)
     samples = offset_samples(station, 2.0)
-    clipped = samples.with_boundary_points(locator.inside)
+    clipped = samples.with_boundary_points(locator.label)
     added = clipped.points[len(samples.points):]
     zeta = station.hole.frame.to_local(added)[:, 2]
-    assert len(added) >= 8 and locator.inside(added).all()
+    assert len(added) >= 8 and (locator.label(added) >= 0).all()
     bottom = zeta > 2.0
     assert bottom.any()
     np.testing.assert_allclose(zeta[bottom], THICKNESS, atol=samples.spacing_mm / 2 ** 12)
     np.testing.assert_allclose(distance_to_hole(station.hole.frame.to_local(added), station.corner_depth_mm,
                                                 station.tip_depth_mm), 2.0, rtol=1e-9)
-    deepest_sample = station.hole.frame.to_local(samples.points[locator.inside(samples.points)])[:, 2].max()
+    deepest_sample = station.hole.frame.to_local(samples.points[locator.label(samples.points) >= 0])[:, 2].max()
     assert THICKNESS - deepest_sample > samples.spacing_mm / 2 ** 10
+
+
+def test_boundary_points_straddle_a_material_interface():
+    """Where the 0.5 mm curve passes from cortex into cancellous bone (the layered plate, station
+    at the 4 mm tip) a point is added on either side, each in an element of its own region and
+    within the bisection's 2⁻¹² of a spacing (plus the chords' sag, < 5 µm) of the interface,
+    where the von Mises stress jumps: without them the samples miss it by up to a spacing."""
+    from hole_cases import assemble_model, inner_cortex, layered_plate
+    from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL
+    from femstudy.hole.probe import MeshLocator
+
+    station = layered_plate().at_station(1)
+    system = assemble_model(station.mesh, 1)
+    locator = MeshLocator(system)
+    samples = offset_samples(station, 0.5)
+    added = samples.with_boundary_points(locator.label).points[len(samples.points):]
+    label = locator.label(added)
+    local = station.hole.frame.to_local(added)
+    gap = local[:, 2] - inner_cortex(local[:, :2])
+    at_interface = np.abs(gap) < 0.005 + samples.spacing_mm / 2 ** 12
+    assert np.sum(at_interface & (label == CORTICAL)) >= 24 and np.sum(at_interface & (label == CANCELLOUS_DISTAL)) >= 24
+    assert np.all(gap[at_interface & (label == CORTICAL)] < 0.005)  # each on its own side
+    assert np.all(gap[at_interface & (label == CANCELLOUS_DISTAL)] > -0.005)
+    sample_local = station.hole.frame.to_local(samples.points[locator.label(samples.points) >= 0])
+    assert np.abs(sample_local[:, 2] - inner_cortex(sample_local[:, :2])).min() > samples.spacing_mm / 2 ** 10

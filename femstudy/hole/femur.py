@@ -8,7 +8,10 @@ deeper than ``depth_cap_mm`` below the top, in which case the column stops at th
 through still-solid bone (Möller & Trumbore 1997 ray–triangle intersection). A cell's region
 is the global mesh's region at its centroid; a centroid just outside the global mesh (the
 local top's chords cut under the global surface's facets) takes its closest global cell's,
-within ``region_tolerance_mm``. Units: mm.
+within ``region_tolerance_mm``. The cortex's inner surface, where it meets cancellous bone
+(the global mesh's faces between cortical and cancellous cells), is ray-cast the same way;
+:class:`SmoothColumns` smooths it and gives it to the local mesh as an interface its layers
+follow, and decides the regions near it by the smoothed surface. Units: mm.
 """
 
 from __future__ import annotations
@@ -18,12 +21,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from femstudy.errors import UserError, require
-from femstudy.femur_model import TetMesh
+from femstudy.femur_model import CORTICAL, TetMesh
 from femstudy.hole.frame import HoleFrame
-from femstudy.meshing.landmarks import boundary_faces
+from femstudy.meshing.landmarks import boundary_faces, region_interface
 
 #: Rays per batch in the ray casts (bounds the (rays × triangles) temporaries).
 RAY_BATCH = 64
+#: Cells whose centroid lies within this depth of the smoothed inner cortical surface take
+#: their region from the side of it they are on, not from the global mesh [mm].
+INTERFACE_BAND_MM = 1.5
+#: Fraction of the local model's columns that must cross the inner cortical surface for the
+#: local mesh to follow it.
+INTERFACE_COVER = 0.9
 
 
 def _crossings(origins: np.ndarray, direction: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -52,6 +61,11 @@ class FemurColumns:
     boundary: np.ndarray
     depth_cap_mm: float
     region_tolerance_mm: float
+    inner: np.ndarray
+    inner_codes: np.ndarray
+
+    #: the raw columns give the local mesh no interface to follow (:class:`SmoothColumns` does)
+    interface = None
 
     def _rays(self, xy: np.ndarray, faces: np.ndarray):
         xy = np.asarray(xy, float)
@@ -83,19 +97,28 @@ class FemurColumns:
                             "the submodel radius reaches beyond the bone")
         return first
 
+    def _first_below(self, xy: np.ndarray, faces: np.ndarray, top: np.ndarray) -> np.ndarray:
+        """(n,) depth of the first crossing of ``faces`` below ``top`` on every column [mm] (inf: none)."""
+        origins, tri, lift = self._rays(xy, faces)
+        gap = 1e-6 * lift
+        found = []
+        for i in range(0, len(origins), RAY_BATCH):
+            t = _crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri) - lift
+            found.append(np.where(t > top[i:i + RAY_BATCH, None] + gap, t, np.inf).min(axis=1, initial=np.inf))
+        return np.concatenate(found) if found else np.full(len(xy), np.inf)
+
     def bottom(self, xy: np.ndarray, top: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(n,) depth of each column's bottom [mm] and (n,) True where it is a free surface
         (``top``: the columns' :meth:`top`, when already cast)."""
         top = self.top(xy) if top is None else top
-        origins, tri, lift = self._rays(xy, self.boundary)
-        gap = 1e-6 * lift
-        exits = []
-        for i in range(0, len(origins), RAY_BATCH):
-            t = _crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri) - lift
-            exits.append(np.where(t > top[i:i + RAY_BATCH, None] + gap, t, np.inf).min(axis=1))
-        exit_depth = np.concatenate(exits)
+        exit_depth = self._first_below(xy, self.boundary, top)
         free = exit_depth <= top + self.depth_cap_mm
         return np.where(free, exit_depth, top + self.depth_cap_mm), free
+
+    def inner_depth(self, xy: np.ndarray, top: np.ndarray) -> np.ndarray:
+        """(n,) depth of the cortex's inner surface against cancellous bone on every column below
+        its ``top`` [mm] (inf where the column meets none)."""
+        return self._first_below(xy, self.inner, top) if len(self.inner) else np.full(len(xy), np.inf)
 
     def region(self, points: np.ndarray) -> np.ndarray:
         """(n,) global region code at each point (0 farther than the tolerance from the mesh)."""
@@ -136,8 +159,9 @@ def femur_columns(mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, dept
     require(depth_cap_mm > 0, f"the depth cap must be positive, got {depth_cap_mm} mm")
     outer_faces = np.asarray(outer_faces, dtype=np.int64).reshape(-1, 3)
     require(len(outer_faces) > 0, "the outer surface has no triangles")
+    inner, inner_codes = region_interface(mesh, CORTICAL)
     return FemurColumns(mesh, frame, outer_faces, boundary_faces(mesh), float(depth_cap_mm),
-                        float(region_tolerance_mm))
+                        float(region_tolerance_mm), inner, inner_codes)
 
 
 @dataclass(frozen=True)
@@ -150,13 +174,19 @@ class SmoothColumns:
     grid (``spacing_mm``) over the disk, convolved with a Gaussian of standard deviation
     ``smoothing_mm`` and interpolated by bicubic splines, so every refinement of the local
     model sees one smooth surface. The bottom's exit depth is clipped 1 mm below the cap before
-    smoothing; a column is free where the smoothed exit lies above the cap. Regions are the
-    global mesh's (unsmoothed).
+    smoothing; a column is free where the smoothed exit lies above the cap. The cortex's inner
+    surface against cancellous bone, where at least :data:`INTERFACE_COVER` of the columns
+    cross it above their bottom, is smoothed the same way (``inner_spline``, its depth below
+    the top) and is the :attr:`interface` the local mesh follows; within
+    :data:`INTERFACE_BAND_MM` of it a cell is cortical above it and cancellous (``inner_code``)
+    below. Other regions are the global mesh's (unsmoothed).
     """
 
     raw: FemurColumns
     top_spline: object
     exit_spline: object
+    inner_spline: object = None
+    inner_code: int = 0
 
     @property
     def frame(self) -> HoleFrame:
@@ -173,8 +203,22 @@ class SmoothColumns:
         free = exit_depth <= top + self.raw.depth_cap_mm
         return np.where(free, exit_depth, top + self.raw.depth_cap_mm), free
 
+    @property
+    def interface(self):
+        """Callable (n, 2) → (n,) ζ of the smoothed inner cortical surface [mm], or None."""
+        if self.inner_spline is None:
+            return None
+        return lambda xy: self.top(xy) + self.inner_spline(np.asarray(xy, float)[:, 0], np.asarray(xy, float)[:, 1],
+                                                           grid=False)
+
     def region(self, points: np.ndarray) -> np.ndarray:
-        return self.raw.region(points)
+        codes = self.raw.region(points)
+        if self.inner_spline is None:
+            return codes
+        local = self.frame.to_local(np.asarray(points, float))
+        below = local[:, 2] - self.interface(local[:, :2])
+        near = (codes != 0) & (np.abs(below) < INTERFACE_BAND_MM)
+        return np.where(near, np.where(below < 0, CORTICAL, np.where(codes == CORTICAL, self.inner_code, codes)), codes)
 
 
 def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float = 1.0,
@@ -213,6 +257,11 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
     exit_below = np.full(len(xy), np.nan)
     bottom, free = columns.bottom(xy[inside], top[inside])
     exit_below[inside] = np.where(free, bottom - top[inside], columns.depth_cap_mm + 1.0)
+    inner_below = np.full(len(xy), np.nan)
+    inner_below[inside] = columns.inner_depth(xy[inside], top[inside]) - top[inside]
+    inner_below[~(inner_below < exit_below)] = np.nan
+    disk_ = inside & (np.hypot(xy[:, 0], xy[:, 1]) <= radius_mm)
+    has_inner = np.isfinite(inner_below[disk_]).mean() >= INTERFACE_COVER and len(columns.inner_codes)
     sigma = smoothing_mm / spacing_mm
 
     def smoothed(values: np.ndarray) -> RectBivariateSpline:
@@ -221,4 +270,8 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
         field = gaussian_filter(np.nan_to_num(grid), sigma, mode="constant") / np.maximum(weight, 1e-12)
         return RectBivariateSpline(axis, axis, field, kx=3, ky=3)
 
-    return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)))
+    if not has_inner:
+        return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)))
+    codes, counts = np.unique(columns.inner_codes, return_counts=True)
+    return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)),
+                         smoothed(inner_below), int(codes[np.argmax(counts)]))

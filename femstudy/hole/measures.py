@@ -11,7 +11,9 @@ exclusion zone around it.
   bone (above the top, in the canal) are skipped; where the curve leaves the bone, the point
   on the bone's surface is added (:meth:`~femstudy.hole.samples.OffsetSamples.with_boundary_points`),
   so that a maximum on the canal under the tip or on the entry surface is taken on that
-  surface at every refinement.
+  surface at every refinement; where it passes from cortical into cancellous bone, a point on
+  either side of that interface is added, each in an element of its own side, so the stress
+  that jumps there is read on both sides of it.
 * **Outside an exclusion radius ρ** (:func:`exclusion_measures`): the same over the
   stiffness quadrature points of the station farther than ρ from the hole surface, excluding
   points within ``cut_margin_mm`` of a cut-face node (there the local solution is the
@@ -166,7 +168,7 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     locator = MeshLocator(system)
     out = []
     for delta in distances_mm:
-        samples = offset_samples(station, delta).with_boundary_points(locator.inside)
+        samples = offset_samples(station, delta).with_boundary_points(locator.label)
         probe = point_probe(system, samples.points, locator=locator)
         e = probe.element[probe.inside]
         values = _point_values(probe.points[probe.inside], np.full(len(e), float(delta)), probe.stress(u)[probe.inside],

@@ -21,6 +21,15 @@ Geometry (local frame of :mod:`femstudy.hole.frame`: r from the axis, depth ζ a
   ligament between the deepest cone and the bottom, which bends under the thrust: one 0.4 mm
   layer there made the stresses beside it converge at order ~1 instead of 2, docs/hole.md),
   at most ``ligament_depth_mm`` ahead of it.
+* optionally one more layer, at offset s_I, that follows a material interface ζ_I(x₁, x₂)
+  (the cortex's inner surface, where the hole passes from cortical into cancellous bone): on
+  and outside the hole circle every column's offsets are moved by a hat function of s that
+  carries s_I to ζ_I and keeps the station corners in place (:func:`_conforming_offsets`), so
+  the interface is a surface of element faces there rather than a staircase of cells whose
+  centroids fall on either side of it, and the stresses beside the wall, which jump across it,
+  are read on the right side at every refinement. Inside the hole circle the layers move
+  only between the corners around s_I, so they follow the interface where it lies between
+  those corners' cones and miss it elsewhere (bone under the tip, drilled by later stations).
   A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it, on a
   station's cone too: a cone breaking through the bottom reaches it up to snap × the layer
   spacing early, rather than leave a sliver-thin sheet of bone (up to 0.18 mm with the
@@ -253,15 +262,16 @@ def _blend(r: np.ndarray, R: float) -> np.ndarray:
 
 
 def _layer_offsets(disk_: Disk, cot: float, corners: np.ndarray, s_max: float, sizes: dict,
-                   ligament: tuple[float, float] | None) -> np.ndarray:
+                   ligament: tuple[float, float] | None, interface: float | None = None) -> np.ndarray:
     """s_j: the cone-region offsets −(R − r_i) cot(β/2) of the rings inside the hole, then
-    offsets graded from 0 to s_max with the station corners among them: ``axial_mm`` at 0 and
-    at the corners, ``ligament_mm`` over the offsets ``ligament`` = (a, b) of the bone ahead of
-    the deepest tip (None: drilled through), growing by ``growth`` per element away from them up
-    to ``axial_max_mm``."""
+    offsets graded from 0 to s_max with the station corners (and the ``interface`` offset, if
+    any) among them: ``axial_mm`` at 0, at the corners and at the interface, ``ligament_mm``
+    over the offsets ``ligament`` = (a, b) of the bone ahead of the deepest tip (None: drilled
+    through), growing by ``growth`` per element away from them up to ``axial_max_mm``."""
     R = disk_.ring_radii[disk_.hole_ring]
     negative = -(R - disk_.ring_radii[:disk_.hole_ring]) * cot
-    refine_at = np.concatenate([[0.0], corners])
+    extra = [] if interface is None else [interface]
+    refine_at = np.concatenate([[0.0], corners, extra])
     g, h0, h_max, h_lig = sizes["growth"], sizes["axial_mm"], sizes["axial_max_mm"], sizes["ligament_mm"]
 
     def size(s):
@@ -272,12 +282,51 @@ def _layer_offsets(disk_: Disk, cot: float, corners: np.ndarray, s_max: float, s
         outside = np.maximum(np.maximum(ligament[0] - s, s - ligament[1]), 0.0)
         return np.minimum(h, h_lig + (g - 1.0) * outside)
 
-    fixed = np.unique(np.concatenate([[0.0, s_max], corners[(corners > 0) & (corners < s_max)]]))
+    fixed = np.unique(np.concatenate([[0.0, s_max], corners[(corners > 0) & (corners < s_max)], extra]))
     return np.concatenate([negative, graded_points(fixed, size)])
 
 
+def _interface_offset(sigma: np.ndarray, corners: np.ndarray, s_max: float, axial_mm: float) -> float | None:
+    """s_I: the layer offset that becomes the material interface, the median of the offsets
+    ``sigma`` the columns beside the hole would need, kept half an ``axial_mm`` from 0, from
+    s_max and from every station corner (pinned layers); None when no such offset is left."""
+    target = float(np.median(sigma))
+    pinned = np.concatenate([[0.0, s_max], corners])
+    if not 0.5 * axial_mm < target < s_max - 0.5 * axial_mm:
+        return None
+    near = pinned[np.argmin(np.abs(pinned - target))]
+    if abs(target - near) < 0.5 * axial_mm:
+        target = near + np.copysign(0.5 * axial_mm, target - near)
+    return target if np.abs(pinned - target).min() >= 0.5 * axial_mm - 1e-12 else None
+
+
+def _conforming_offsets(s: np.ndarray, s_I: float, sigma: np.ndarray, w: np.ndarray, corners: np.ndarray,
+                        keep: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+    """Per-column offsets s'_j = s_j + δ φ(s_j) that carry the layer s_I to σ (the interface).
+
+    φ is the hat function that is 1 at s_I and 0 outside [lo, hi]: on the hole circle and
+    inside it (w = 0) lo and hi are the station corners (or 0 and s_max) around s_I, which stay
+    where they are so every station's hole is still a union of cells; far from the hole (w = 1)
+    the hat spans the whole column [0, s_max]; in between the bounds blend with w. δ = σ − s_I
+    is clipped so σ stays ``keep`` of the way inside [lo, hi] (the layers stay ordered and no
+    thinner than ``keep`` of their nominal thickness); there the layer misses the interface.
+
+    Returns the (n_columns, L) offsets and (n_columns,) True where the layer meets σ."""
+    s_max = s[-1]
+    pinned = np.concatenate([[0.0, s_max], corners])
+    c_lo, c_hi = pinned[pinned < s_I].max(), pinned[pinned > s_I].min()
+    lo, hi = (1 - w) * c_lo, (1 - w) * c_hi + w * s_max
+    target = np.clip(sigma, lo + keep * (s_I - lo), hi - keep * (hi - s_I))
+    delta = (target - s_I)[:, None]
+    up = (s[None, :] - lo[:, None]) / (s_I - lo)[:, None]
+    down = (hi[:, None] - s[None, :]) / (hi - s_I)[:, None]
+    hat = np.clip(np.minimum(up, down), 0.0, 1.0)
+    return s[None, :] + delta * hat, np.isclose(target, sigma, rtol=0, atol=1e-12)
+
+
 def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, submodel_radius_mm: float,
-              tip_depths_mm, top, bottom, region=None, resolution: Resolution = Resolution()) -> HoleMesh:
+              tip_depths_mm, top, bottom, region=None, resolution: Resolution = Resolution(),
+              interface=None) -> HoleMesh:
     """Mesh the bone around a drill axis, with the hole at every station as a union of cells.
 
     Parameters
@@ -292,6 +341,8 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     region : callable, (n, 3) global points → (n,) region codes (0: empty, the cell is dropped);
              default: all cortical
     resolution : :class:`Resolution`
+    interface : callable, (n, 2) → (n,) ζ of a material interface below the top (the cortex's
+                inner surface) that one layer follows on and outside the hole circle; None: none
 
     Returns
     -------
@@ -330,13 +381,25 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     ahead = free[0] and tips.max() < B[0]  # bone ahead of the deepest tip on the axis (d2.xy[0])
     ligament = ((float(corners.max()), min(float(B[0]) - cone, float(corners.max()) + resolution.ligament_depth_mm))
                 if ahead else None)
-    s = _layer_offsets(d2, cot, corners, float(np.max(B - lift)), sizes, ligament)
+    s_max = float(np.max(B - lift))
     c = np.maximum(R - d2.radius, 0.0) * cot
-    Z = np.clip(s[None, :] + (c + lift)[:, None], T[:, None], B[:, None])
-    spacing = np.diff(s)
+    sigma = s_I = None
+    if interface is not None:
+        sigma = np.asarray(interface(d2.xy), float) - c - lift
+        beside = (d2.radius >= R * (1 - 1e-9)) & (d2.radius <= 2 * R)
+        s_I = _interface_offset(sigma[beside], corners, s_max, sizes["axial_mm"])
+    s = _layer_offsets(d2, cot, corners, s_max, sizes, ligament, s_I)
+    S = np.broadcast_to(s, (len(d2.xy), len(s)))
+    if s_I is not None:
+        S, meets = _conforming_offsets(s, s_I, sigma, w, corners)
+        log.info("hole mesh: the layer at offset %.2f mm follows the material interface on %d of %d columns",
+                 s_I, meets.sum(), len(meets))
+    Z = np.clip(S + (c + lift)[:, None], T[:, None], B[:, None])
+    spacing = np.diff(S, axis=1)
     snap = resolution.snap
-    below_top = Z - T[:, None] < snap * np.concatenate([[np.inf], spacing])[None, :]
-    above_bottom = B[:, None] - Z < snap * np.concatenate([spacing, [np.inf]])[None, :]
+    inf = np.full((len(Z), 1), np.inf)
+    below_top = Z - T[:, None] < snap * np.concatenate([inf, spacing], axis=1)
+    above_bottom = B[:, None] - Z < snap * np.concatenate([spacing, inf], axis=1)
     below_top[:, 0] = above_bottom[:, -1] = True
     Z = np.where(below_top, T[:, None], np.where(above_bottom, B[:, None], Z))
 

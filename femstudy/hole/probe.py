@@ -129,12 +129,13 @@ class MeshLocator:
         element[worst < -BOUNDARY_TOLERANCE] = -1
         return element, xi, invJ
 
-    def inside(self, points: np.ndarray) -> np.ndarray:
-        """(n,) True where a point (n, 3) [mm] lies in the mesh: :meth:`locate` without its
-        closest-cell search, quicker for the many points of a bisection. VTK's containing cell
-        alone is not enough: its tolerance accepts points just outside the mesh."""
-        points = np.atleast_2d(np.asarray(points, float))
-        return self.locate(points, search_missed=False)[0] >= 0
+    def label(self, points: np.ndarray) -> np.ndarray:
+        """(n,) region code of the element holding each point (n, 3) [mm], −1 outside the mesh:
+        :meth:`locate` without its closest-cell search, quicker for the many points of a
+        bisection. VTK's containing cell alone is not enough: its tolerance accepts points just
+        outside the mesh."""
+        element = self.locate(np.atleast_2d(np.asarray(points, float)), search_missed=False)[0]
+        return np.where(element >= 0, self.system.region[np.maximum(element, 0)], -1)
 
 
 def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,

@@ -103,38 +103,45 @@ class OffsetSamples:
         """(n, 3) global points [mm] at arc lengths t and azimuths θ."""
         return _swept(self.curve, self.frame, t, theta)
 
-    def with_boundary_points(self, inside, steps: int = 12) -> OffsetSamples:
-        """These samples and, on the azimuth of each, the points where the curve leaves the bone.
+    def with_boundary_points(self, label, steps: int = 12) -> OffsetSamples:
+        """These samples and, on the azimuth of each, the points where the curve leaves the bone
+        or passes from one material into another.
 
-        Between a sample (t_i, θ) and the curve's neighbouring stations (t_i±1, θ), one in
-        the bone and one not, the crossing is bisected ``steps`` times in t (to spacing/2^steps)
-        and its bone end added: a measure's maximum on the bone's own surface (the canal under
-        the tip, the entry surface) is then sampled there, not at the last sample before it,
-        which would move with the mesh of that surface.
+        Between a sample (t_i, θ) and a neighbouring station of the curve (t_i±1, θ) with
+        another label, one of the two in the bone, the crossing is bisected ``steps`` times in t
+        (to spacing/2^steps) and its bone end added, or both ends where both are in the bone (a
+        material interface): a measure's maximum on the bone's own surface (the canal under the
+        tip, the entry surface) or on either side of the cortex's inner surface (where the stress
+        jumps) is then sampled there, not at the last sample before it, which would move with
+        the mesh of that surface.
 
         Parameters
         ----------
-        inside : callable, (n, 3) points → (n,) True where a point lies in the bone
+        label : callable, (n, 3) points → (n,) int, the region of each point, −1 outside the bone
         steps : bisections per crossing
         """
         knots = np.unique(self.t)
         i = np.searchsorted(knots, self.t)
-        here = inside(self.points)
-        lo, hi, theta = [], [], []
+        here = label(self.points)
+        lo, hi, theta, side = [], [], [], []
         for step in (-1, 1):
             has = (i + step >= 0) & (i + step < len(knots))
             t_other = knots[np.clip(i + step, 0, len(knots) - 1)]
-            there = np.zeros(len(i), bool)
-            there[has] = inside(self.at(t_other[has], self.theta[has]))
-            cross = has & (here != there)
-            lo.append(np.where(here, self.t, t_other)[cross])
-            hi.append(np.where(here, t_other, self.t)[cross])
+            there = here.copy()
+            there[has] = label(self.at(t_other[has], self.theta[has]))
+            cross = has & (here != there) & ((here >= 0) | (there >= 0))
+            lo.append(np.where(here >= 0, self.t, t_other)[cross])  # a bone end
+            hi.append(np.where(here >= 0, t_other, self.t)[cross])
             theta.append(self.theta[cross])
-        lo, hi, theta = map(np.concatenate, (lo, hi, theta))
+            side.append(np.where((here < 0) | (there < 0), -1, here)[cross])  # −1: leaving the bone
+        lo, hi, theta, side = map(np.concatenate, (lo, hi, theta, side))
         for _ in range(steps):
             mid = (lo + hi) / 2
-            ok = inside(self.at(mid, theta))
-            lo, hi = np.where(ok, mid, lo), np.where(ok, hi, mid)
+            at = label(self.at(mid, theta))
+            same = np.where(side < 0, at >= 0, at == side)
+            lo, hi = np.where(same, mid, lo), np.where(same, hi, mid)
+        interface = side >= 0  # both ends are in the bone: keep the far side's too
+        lo, theta = np.concatenate([lo, hi[interface]]), np.concatenate([theta, theta[interface]])
         return OffsetSamples(self.distance_mm, self.spacing_mm, np.concatenate([self.points, self.at(lo, theta)]),
                              np.concatenate([self.part, self.curve.part(lo)]), np.concatenate([self.t, lo]),
                              np.concatenate([self.theta, theta]), self.curve, self.frame)

@@ -258,7 +258,8 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
     axis_bottom = float(axis_bottom[0]) if axis_free[0] else np.inf
     tips = station_tips(options, loading.depth_mm, axis_bottom)
     hole = hole_mesh(frame, case.drill.diameter_mm, case.drill.point_angle_deg, options.submodel_radius_mm, tips,
-                     columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement))
+                     columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement),
+                     columns.interface)
     mesh_seconds = time.perf_counter() - start
     log.info("hole model: %d stations (tips %s mm), column mesh %.1f s", len(tips),
              ", ".join(f"{t:.2f}" for t in tips), mesh_seconds)

@@ -30,6 +30,23 @@ def boundary_faces(mesh: TetMesh) -> np.ndarray:
     return faces[counts[inverse.ravel()] == 1]
 
 
+def region_interface(mesh: TetMesh, code: int = CORTICAL) -> tuple[np.ndarray, np.ndarray]:
+    """Faces (k, 3) shared by a tet of region ``code`` and a tet of another region, and (k,)
+    that other region's code (the cortex's inner surface against cancellous bone)."""
+    t = mesh.tets
+    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
+    owner = np.tile(np.arange(len(t)), 4)
+    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    order = np.argsort(inverse, kind="stable")
+    pairs = order[counts[inverse[order]] == 2].reshape(-1, 2)
+    a, b = mesh.region[owner[pairs[:, 0]]], mesh.region[owner[pairs[:, 1]]]
+    first = (a == code) & (b != code)
+    second = (b == code) & (a != code)
+    return (np.concatenate([faces[pairs[first, 0]], faces[pairs[second, 1]]]),
+            np.concatenate([b[first], a[second]]))
+
+
 def outer_faces(mesh: TetMesh, frame: Frame) -> np.ndarray:
     """Boundary faces on the periosteal surface (the connected boundary piece farthest out).
 
