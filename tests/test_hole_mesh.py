@@ -263,3 +263,17 @@ def test_a_material_interface_is_followed_by_element_faces_beside_the_hole():
         cone = hole.at_station(k).faces["hole_bottom"]
         r = np.hypot(local[cone, 0], local[cone, 1])
         np.testing.assert_allclose(local[cone, 2], tip - CONE + (RADIUS - r) * CONE / RADIUS, atol=1e-9)
+
+
+def test_an_interface_crossing_a_station_corner_on_the_wall_is_not_followed():
+    """An inner surface tilted through the 2.65 mm corner on the hole circle (ζ_I = 2.65 + 0.9 x)
+    could be followed on half of the circle only, with the layers beside the wall squeezed
+    against the pinned corner: the mesh is then the one without an interface."""
+    frame = HoleFrame.along([0, 0, 0], [0, 0, 1])
+    flat = lambda xy: np.zeros(len(xy))  # noqa: E731
+    bottom = lambda xy: (np.full(len(xy), 8.0), np.ones(len(xy), bool))  # noqa: E731
+    plain = hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [2.0, 4.0, 6.0], flat, bottom)
+    steep = hole_mesh(frame, DIAMETER, POINT_ANGLE, 6.0, [2.0, 4.0, 6.0], flat, bottom,
+                      interface=lambda xy: 2.65 + 0.9 * xy[:, 0])
+    np.testing.assert_array_equal(steep.layer_offsets_mm, plain.layer_offsets_mm)
+    np.testing.assert_array_equal(steep.mesh.points, plain.mesh.points)

@@ -30,6 +30,8 @@ Geometry (local frame of :mod:`femstudy.hole.frame`: r from the axis, depth ζ a
   are read on the right side at every refinement. Inside the hole circle the layers move
   only between the corners around s_I, so they follow the interface where it lies between
   those corners' cones and miss it elsewhere (bone under the tip, drilled by later stations).
+  Where the interface crosses a corner on the hole circle itself (a steeply inclined cortex,
+  as at the femoral neck), it is not followed at all (:data:`INTERFACE_ON_WALL`).
   A vertex closer than ``snap`` of a layer spacing to the top or bottom moves onto it, on a
   station's cone too: a cone breaking through the bottom reaches it up to snap × the layer
   spacing early, rather than leave a sliver-thin sheet of bone (up to 0.18 mm with the
@@ -68,6 +70,10 @@ log = logging.getLogger(__name__)
 LABELS = ("hole_wall", "hole_bottom", "top", "bottom_free", "cut_bottom", "cut_lateral", "void")
 #: Face labels on which a submodel takes the global model's displacements.
 CUT_LABELS = ("cut_bottom", "cut_lateral")
+#: Fraction of the hole circle on which the interface layer must reach the interface for the
+#: mesh to follow it: where the interface crosses a station's corner there, the pinned corners
+#: would squeeze the layers beside the wall and the interface would still be missed.
+INTERFACE_ON_WALL = 0.75
 
 
 @dataclass(frozen=True)
@@ -392,8 +398,15 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     S = np.broadcast_to(s, (len(d2.xy), len(s)))
     if s_I is not None:
         S, meets = _conforming_offsets(s, s_I, sigma, w, corners)
-        log.info("hole mesh: the layer at offset %.2f mm follows the material interface on %d of %d columns",
-                 s_I, meets.sum(), len(meets))
+        on_wall = meets[d2.ring == d2.hole_ring].mean()
+        if on_wall < INTERFACE_ON_WALL:
+            log.warning("hole mesh: the material interface crosses a station's corner on the hole circle (followed on "
+                        "%.0f %% of it); its cells take their material by centroid instead", 100 * on_wall)
+            s = _layer_offsets(d2, cot, corners, s_max, sizes, ligament)
+            S = np.broadcast_to(s, (len(d2.xy), len(s)))
+        else:
+            log.info("hole mesh: the layer at offset %.2f mm follows the material interface on %d of %d columns",
+                     s_I, meets.sum(), len(meets))
     Z = np.clip(S + (c + lift)[:, None], T[:, None], B[:, None])
     spacing = np.diff(S, axis=1)
     snap = resolution.snap
