@@ -16,7 +16,7 @@ follow, and decides the regions near it by the smoothed surface. Units: mm.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -208,8 +208,11 @@ class SmoothColumns:
         """Callable (n, 2) → (n,) ζ of the smoothed inner cortical surface [mm], or None."""
         if self.inner_spline is None:
             return None
-        return lambda xy: self.top(xy) + self.inner_spline(np.asarray(xy, float)[:, 0], np.asarray(xy, float)[:, 1],
-                                                           grid=False)
+
+        def depth(xy: np.ndarray) -> np.ndarray:
+            xy = np.asarray(xy, float)
+            return self.top(xy) + self.inner_spline(xy[:, 0], xy[:, 1], grid=False)
+        return depth
 
     def region(self, points: np.ndarray) -> np.ndarray:
         codes = self.raw.region(points)
@@ -270,8 +273,8 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
         field = gaussian_filter(np.nan_to_num(grid), sigma, mode="constant") / np.maximum(weight, 1e-12)
         return RectBivariateSpline(axis, axis, field, kx=3, ky=3)
 
+    smooth = SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)))
     if not has_inner:
-        return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)))
+        return smooth
     codes, counts = np.unique(columns.inner_codes, return_counts=True)
-    return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)),
-                         smoothed(inner_below), int(codes[np.argmax(counts)]))
+    return replace(smooth, inner_spline=smoothed(inner_below), inner_code=int(codes[np.argmax(counts)]))

@@ -292,42 +292,68 @@ def _layer_offsets(disk_: Disk, cot: float, corners: np.ndarray, s_max: float, s
     return np.concatenate([negative, graded_points(fixed, size)])
 
 
-def _interface_offset(sigma: np.ndarray, corners: np.ndarray, s_max: float, axial_mm: float) -> float | None:
+#: Least fraction of its nominal thickness a layer keeps when the interface layer is carried
+#: towards a pinned one; beyond that the interface layer stops short of the interface.
+KEEP = 0.2
+
+
+def _hat_bounds(s_I: float, w: np.ndarray, corners: np.ndarray, s_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of the hat around s_I on every column: the pinned offsets (0, the station corners,
+    s_max) around s_I where w = 0 (on and inside the hole circle), 0 and s_max where w = 1."""
+    pinned = np.concatenate([[0.0, s_max], corners])
+    c_lo, c_hi = pinned[pinned < s_I].max(), pinned[pinned > s_I].min()
+    return (1 - w) * c_lo, (1 - w) * c_hi + w * s_max
+
+
+def _reached(sigma: np.ndarray, s_I: float, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """σ clipped to keep the layers ordered (``KEEP``), and True where that left it unchanged."""
+    target = np.clip(sigma, lo + KEEP * (s_I - lo), hi - KEEP * (hi - s_I))
+    return target, np.isclose(target, sigma, rtol=0, atol=1e-12)
+
+
+def _interface_offset(sigma: np.ndarray, beside: np.ndarray, on_wall: np.ndarray, corners: np.ndarray,
+                      s_max: float, axial_mm: float) -> float | None:
     """s_I: the layer offset that becomes the material interface, the median of the offsets
-    ``sigma`` the columns beside the hole would need, kept half an ``axial_mm`` from 0, from
-    s_max and from every station corner (pinned layers); None when no such offset is left."""
-    target = float(np.median(sigma))
+    ``sigma`` the columns ``beside`` the hole would need, kept half an ``axial_mm`` from 0, from
+    s_max and from every station corner (pinned layers); None when no such offset is left, or
+    when the layer would reach the interface on less than :data:`INTERFACE_ON_WALL` of the
+    columns ``on_wall`` (the hole circle, where the corners are pinned)."""
+    target = float(np.median(sigma[beside]))
     pinned = np.concatenate([[0.0, s_max], corners])
     if not 0.5 * axial_mm < target < s_max - 0.5 * axial_mm:
         return None
     near = pinned[np.argmin(np.abs(pinned - target))]
     if abs(target - near) < 0.5 * axial_mm:
         target = near + np.copysign(0.5 * axial_mm, target - near)
-    return target if np.abs(pinned - target).min() >= 0.5 * axial_mm - 1e-12 else None
+    if np.abs(pinned - target).min() < 0.5 * axial_mm - 1e-12:
+        return None
+    lo, hi = _hat_bounds(target, np.zeros(int(on_wall.sum())), corners, s_max)
+    reached = _reached(sigma[on_wall], target, lo, hi)[1].mean()
+    if reached < INTERFACE_ON_WALL:
+        log.warning("hole mesh: the material interface crosses a station's corner on the hole circle (followed on "
+                    "%.0f %% of it); its cells take their material by centroid instead", 100 * reached)
+        return None
+    return target
 
 
-def _conforming_offsets(s: np.ndarray, s_I: float, sigma: np.ndarray, w: np.ndarray, corners: np.ndarray,
-                        keep: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+def _conforming_offsets(s: np.ndarray, s_I: float, sigma: np.ndarray, w: np.ndarray,
+                        corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-column offsets s'_j = s_j + δ φ(s_j) that carry the layer s_I to σ (the interface).
 
-    φ is the hat function that is 1 at s_I and 0 outside [lo, hi]: on the hole circle and
-    inside it (w = 0) lo and hi are the station corners (or 0 and s_max) around s_I, which stay
-    where they are so every station's hole is still a union of cells; far from the hole (w = 1)
-    the hat spans the whole column [0, s_max]; in between the bounds blend with w. δ = σ − s_I
-    is clipped so σ stays ``keep`` of the way inside [lo, hi] (the layers stay ordered and no
-    thinner than ``keep`` of their nominal thickness); there the layer misses the interface.
+    φ is the hat function that is 1 at s_I and 0 outside [lo, hi] (:func:`_hat_bounds`): on the
+    hole circle and inside it the station corners around s_I stay where they are, so every
+    station's hole is still a union of cells; far from the hole the hat spans the whole column.
+    δ = σ − s_I is clipped so σ stays :data:`KEEP` of the way inside [lo, hi] (the layers stay
+    ordered and no thinner than ``KEEP`` of their nominal thickness); there the layer misses
+    the interface.
 
     Returns the (n_columns, L) offsets and (n_columns,) True where the layer meets σ."""
-    s_max = s[-1]
-    pinned = np.concatenate([[0.0, s_max], corners])
-    c_lo, c_hi = pinned[pinned < s_I].max(), pinned[pinned > s_I].min()
-    lo, hi = (1 - w) * c_lo, (1 - w) * c_hi + w * s_max
-    target = np.clip(sigma, lo + keep * (s_I - lo), hi - keep * (hi - s_I))
-    delta = (target - s_I)[:, None]
+    lo, hi = _hat_bounds(s_I, w, corners, s[-1])
+    target, meets = _reached(sigma, s_I, lo, hi)
     up = (s[None, :] - lo[:, None]) / (s_I - lo)[:, None]
     down = (hi[:, None] - s[None, :]) / (hi - s_I)[:, None]
     hat = np.clip(np.minimum(up, down), 0.0, 1.0)
-    return s[None, :] + delta * hat, np.isclose(target, sigma, rtol=0, atol=1e-12)
+    return s[None, :] + (target - s_I)[:, None] * hat, meets
 
 
 def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, submodel_radius_mm: float,
@@ -393,20 +419,13 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     if interface is not None:
         sigma = np.asarray(interface(d2.xy), float) - c - lift
         beside = (d2.radius >= R * (1 - 1e-9)) & (d2.radius <= 2 * R)
-        s_I = _interface_offset(sigma[beside], corners, s_max, sizes["axial_mm"])
+        s_I = _interface_offset(sigma, beside, d2.ring == d2.hole_ring, corners, s_max, sizes["axial_mm"])
     s = _layer_offsets(d2, cot, corners, s_max, sizes, ligament, s_I)
     S = np.broadcast_to(s, (len(d2.xy), len(s)))
     if s_I is not None:
         S, meets = _conforming_offsets(s, s_I, sigma, w, corners)
-        on_wall = meets[d2.ring == d2.hole_ring].mean()
-        if on_wall < INTERFACE_ON_WALL:
-            log.warning("hole mesh: the material interface crosses a station's corner on the hole circle (followed on "
-                        "%.0f %% of it); its cells take their material by centroid instead", 100 * on_wall)
-            s = _layer_offsets(d2, cot, corners, s_max, sizes, ligament)
-            S = np.broadcast_to(s, (len(d2.xy), len(s)))
-        else:
-            log.info("hole mesh: the layer at offset %.2f mm follows the material interface on %d of %d columns",
-                     s_I, meets.sum(), len(meets))
+        log.info("hole mesh: the layer at offset %.2f mm follows the material interface on %d of %d columns",
+                 s_I, meets.sum(), len(meets))
     Z = np.clip(S + (c + lift)[:, None], T[:, None], B[:, None])
     spacing = np.diff(S, axis=1)
     snap = resolution.snap

@@ -21,25 +21,26 @@ from femstudy.femur_model import CORTICAL, Clamps, DrillSite, TetMesh
 from femstudy.meshing.frame import Frame
 
 
+def _faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every tet's four faces (4m, 3), ordered so their normals point out of it, the tet owning
+    each, and for each the index of its distinct face and that distinct face's count (1 or 2)."""
+    faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
+    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return faces, np.tile(np.arange(len(tets)), 4), inverse.ravel(), counts
+
+
 def boundary_faces(mesh: TetMesh) -> np.ndarray:
     """Faces (k, 3) belonging to exactly one tet, ordered so their normals point outwards."""
-    t = mesh.tets
-    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return faces[counts[inverse.ravel()] == 1]
+    faces, _, inverse, counts = _faces(mesh.tets)
+    return faces[counts[inverse] == 1]
 
 
 def region_interface(mesh: TetMesh, code: int = CORTICAL) -> tuple[np.ndarray, np.ndarray]:
     """Faces (k, 3) shared by a tet of region ``code`` and a tet of another region, and (k,)
     that other region's code (the cortex's inner surface against cancellous bone)."""
-    t = mesh.tets
-    faces = np.concatenate([t[:, [1, 2, 3]], t[:, [0, 3, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 1]]])
-    owner = np.tile(np.arange(len(t)), 4)
-    _, inverse, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
+    faces, owner, inverse, counts = _faces(mesh.tets)
     order = np.argsort(inverse, kind="stable")
-    pairs = order[counts[inverse[order]] == 2].reshape(-1, 2)
+    pairs = order[counts[inverse[order]] == 2].reshape(-1, 2)  # the two sides of every inner face
     a, b = mesh.region[owner[pairs[:, 0]]], mesh.region[owner[pairs[:, 1]]]
     first = (a == code) & (b != code)
     second = (b == code) & (a != code)
