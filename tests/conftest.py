@@ -49,11 +49,9 @@ def bone_library(tmp_path, monkeypatch):
 
 
 @pytest.fixture(scope="session")
-def mesh_cache(tmp_path_factory, worker_id):
-    """One mesh cache for the whole test session, shared by the xdist workers (entries are
-    written under a temporary name and renamed into place), so a femur is meshed once per run
-    rather than once per worker."""
-    root = tmp_path_factory.getbasetemp()
-    folder = (root if worker_id == "master" else root.parent) / "mesh-cache"
-    folder.mkdir(exist_ok=True)
-    return folder
+def mesh_cache(tmp_path_factory):
+    """One mesh cache per test session and xdist worker, so the built-in femur is meshed once
+    per worker. Not shared between workers: TetWild is not deterministic, so two workers meshing
+    one femur at once store different meshes under one key, and a test holding the first would
+    read back the second."""
+    return tmp_path_factory.mktemp("mesh-cache")
