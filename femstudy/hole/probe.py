@@ -74,10 +74,11 @@ class PointProbe:
         return self._apply(self.stress_operator, u, 6)
 
 
-def _reference_coordinates(system, element: np.ndarray, points: np.ndarray):
-    """ξ (n, 3), J⁻¹ (n, 3, 3) and the smallest barycentric coordinate of each point in ``element``."""
+def _reference_coordinates(system, element: np.ndarray, points: np.ndarray, inverse: np.ndarray | None = None):
+    """ξ (n, 3), J⁻¹ (n, 3, 3) and the smallest barycentric coordinate of each point in ``element``
+    (``inverse``: every element's J⁻¹, when already computed)."""
     mesh = system.mesh
-    invJ, _ = jacobians(mesh.p.T, mesh.t.T[element])
+    invJ = jacobians(mesh.p.T, mesh.t.T[element])[0] if inverse is None else inverse[element]
     xi = np.einsum("nij,nj->ni", invJ, points - mesh.p.T[mesh.t[0, element]])
     return xi, invJ, np.minimum(1 - xi.sum(axis=1), xi.min(axis=1))
 
@@ -97,6 +98,7 @@ class MeshLocator:
         self.system = system
         self._grid = pv.UnstructuredGrid({pv.CellType.TETRA: system.mesh.t.T}, system.mesh.p.T)
         self._centroids = None
+        self._inverse = jacobians(system.mesh.p.T, system.mesh.t.T)[0]  # J⁻¹ of every element, for all queries
 
     def locate(self, points: np.ndarray, search_missed: bool = True):
         """Containing element (−1 if none), reference coordinates ξ and J⁻¹ of every point (n, 3) [mm]
@@ -114,7 +116,7 @@ class MeshLocator:
         xi, invJ, worst = np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan), np.full(n, -np.inf)
         tried = np.flatnonzero(element >= 0)
         if len(tried):
-            xi[tried], invJ[tried], worst[tried] = _reference_coordinates(system, element[tried], points[tried])
+            xi[tried], invJ[tried], worst[tried] = self._coordinates(element[tried], points[tried])
         retry = np.flatnonzero((worst < -BOUNDARY_TOLERANCE) & (worst > -RETRY_WINDOW))
         if len(retry):
             if self._centroids is None:
@@ -122,12 +124,15 @@ class MeshLocator:
             k = min(64, mesh.nelements)
             _, near = self._centroids.query(points[retry], k)
             near = near.reshape(len(retry), k)
-            tries = _reference_coordinates(system, near.ravel(), np.repeat(points[retry], k, axis=0))[2]
+            tries = self._coordinates(near.ravel(), np.repeat(points[retry], k, axis=0))[2]
             best = np.argmax(tries.reshape(len(retry), k), axis=1)
             element[retry] = near[np.arange(len(retry)), best]
-            xi[retry], invJ[retry], worst[retry] = _reference_coordinates(system, element[retry], points[retry])
+            xi[retry], invJ[retry], worst[retry] = self._coordinates(element[retry], points[retry])
         element[worst < -BOUNDARY_TOLERANCE] = -1
         return element, xi, invJ
+
+    def _coordinates(self, element: np.ndarray, points: np.ndarray):
+        return _reference_coordinates(self.system, element, points, self._inverse)
 
     def label(self, points: np.ndarray) -> np.ndarray:
         """(n,) region code of the element holding each point (n, 3) [mm], −1 outside the mesh:
