@@ -60,7 +60,8 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks
     require(1 <= k < n, f"cannot compute {k} modes of a model with {n} free DOFs")
     block = min(k + 2, n - 1)
     X = np.random.default_rng(0).standard_normal((n, block))
-    V = np.zeros((n, 0))
+    space = np.empty((n, min(n, max_blocks * block)), order="F")  # the basis grows in place, column-major
+    V = space[:, :0]
     Kr = Mr = np.zeros((0, 0))
     previous, phi, residual = np.full(k, np.inf), None, None
     for _ in range(max_blocks):
@@ -69,7 +70,9 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks
             break
         phi = residual = None  # of the basis before this block
         KQ, MQ = fs.K @ Q, fs.mass(Q)
-        V = np.hstack([V, Q])
+        m = V.shape[1]
+        space[:, m:m + Q.shape[1]] = Q
+        V = space[:, :m + Q.shape[1]]
         Kr, Mr = grow_projection(Kr, V, KQ, Q.shape[1]), grow_projection(Mr, V, MQ, Q.shape[1])
         omega2, Phi = scipy.linalg.eigh(symmetric(Kr), symmetric(Mr))
         omega2, Phi = omega2[:k], Phi[:, :k]
