@@ -364,3 +364,23 @@ def test_a_wider_drill_is_refined_and_loaded_at_its_own_radius(builtin, forbid_t
     system = fe.assemble(model.mesh, order=1)
     patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
     assert patch.area_mm2 == pytest.approx(np.pi * 1.6 ** 2, rel=0.1)
+
+
+@pytest.mark.parametrize("offset", [0, 2 ** 21], ids=["keyed", "beyond-keys"])
+def test_faces_of_two_tets_sharing_one(offset):
+    """Two tets glued on face (1, 2, 3): six boundary faces pointing outwards, one interface
+    face between their regions; the same with vertex numbers past the face keys' range."""
+    from femstudy.femur_model import TetMesh
+
+    points = np.zeros((offset + 5, 3))
+    points[offset:] = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]
+    tets = np.array([[0, 1, 2, 3], [4, 3, 2, 1]]) + offset
+    mesh = TetMesh(points, tets, np.array([CORTICAL, CANCELLOUS_DISTAL], np.int8))
+    boundary = landmarks.boundary_faces(mesh)
+    assert len(boundary) == 6 and not any(set(f) == {offset + 1, offset + 2, offset + 3} for f in boundary)
+    p = points[boundary]
+    normals = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    centre = points[offset:].mean(axis=0)
+    assert (np.einsum("ij,ij->i", normals, p.mean(axis=1) - centre) > 0).all()  # outwards (a convex union)
+    faces, codes = landmarks.region_interface(mesh, CORTICAL)
+    assert [set(f) for f in faces] == [{offset + 1, offset + 2, offset + 3}] and list(codes) == [CANCELLOUS_DISTAL]

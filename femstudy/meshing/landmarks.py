@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from femstudy.errors import UserError, require
+from femstudy.errors import UserError
 from femstudy.femur_model import CORTICAL, Clamps, DrillSite, TetMesh
 from femstudy.meshing.frame import Frame
 
@@ -25,12 +25,12 @@ def _faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     """Every tet's four faces (4m, 3), ordered so their normals point out of it, the tet owning
     each, and for each the index of its distinct face and that distinct face's count (1 or 2)."""
     faces = np.concatenate([tets[:, [1, 2, 3]], tets[:, [0, 3, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 1]]])
-    # a sorted face (a, b, c) as the one number (a n + b) n + c orders faces as rows would
-    # (np.unique on these keys is ~5x faster than on rows)
+    # a sorted face (a, b, c) as the one number (a n + b) n + c orders faces as rows would, and
+    # np.unique is ~10x faster on such keys than on rows (the rows themselves past 2²¹ points)
     n = np.int64(faces.max()) + 1
-    require(n < 2 ** 21, f"a mesh of {n} points is too large to number its faces")
-    a, b, c = np.sort(faces, axis=1).astype(np.int64).T
-    _, inverse, counts = np.unique((a * n + b) * n + c, return_inverse=True, return_counts=True)
+    rows = np.sort(faces, axis=1).astype(np.int64)
+    keys = (rows[:, 0] * n + rows[:, 1]) * n + rows[:, 2] if n < 2 ** 21 else rows
+    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
     return faces, np.tile(np.arange(len(tets)), 4), inverse.ravel(), counts
 
 
