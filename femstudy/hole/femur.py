@@ -16,7 +16,7 @@ follow, and decides the regions near it by the smoothed surface. Units: mm.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -263,8 +263,8 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
     inner_below = np.full(len(xy), np.nan)
     inner_below[inside] = columns.inner_depth(xy[inside], top[inside]) - top[inside]
     inner_below[~(inner_below < exit_below)] = np.nan
-    disk_ = inside & (np.hypot(xy[:, 0], xy[:, 1]) <= radius_mm)
-    has_inner = np.isfinite(inner_below[disk_]).mean() >= INTERFACE_COVER and len(columns.inner_codes)
+    in_disk = inside & (np.hypot(xy[:, 0], xy[:, 1]) <= radius_mm)
+    has_inner = np.isfinite(inner_below[in_disk]).mean() >= INTERFACE_COVER  # no inner faces: all NaN
     sigma = smoothing_mm / spacing_mm
 
     def smoothed(values: np.ndarray) -> RectBivariateSpline:
@@ -273,8 +273,8 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
         field = gaussian_filter(np.nan_to_num(grid), sigma, mode="constant") / np.maximum(weight, 1e-12)
         return RectBivariateSpline(axis, axis, field, kx=3, ky=3)
 
-    smooth = SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)))
-    if not has_inner:
-        return smooth
-    codes, counts = np.unique(columns.inner_codes, return_counts=True)
-    return replace(smooth, inner_spline=smoothed(inner_below), inner_code=int(codes[np.argmax(counts)]))
+    inner = {}
+    if has_inner:
+        codes, counts = np.unique(columns.inner_codes, return_counts=True)
+        inner = {"inner_spline": smoothed(inner_below), "inner_code": int(codes[np.argmax(counts)])}
+    return SmoothColumns(columns, smoothed(top), smoothed(np.minimum(exit_below, columns.depth_cap_mm + 1.0)), **inner)
