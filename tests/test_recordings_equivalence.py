@@ -51,6 +51,10 @@ RTOL = 1e-4
 TIME_ATOL_S = 0.25 / 250.0  # [s] at RATE_HZ
 #: the diagnosis JSON rounds to 4 significant digits (or 4 decimals): one unit in the last
 JSON_RTOL, JSON_ATOL = 2e-3, 2e-4
+#: Inclusion probabilities are BIC weights over every candidate subset, the losing ones
+#: included, whose non-convex fits may settle elsewhere on a 1e-6 change of the data (see
+#: ``diagnosis``): a losing mechanism's probability (~0.1) moves by a few 1e-4 between variants.
+INCLUSION_ATOL = 5e-3
 CONDITIONS = ((1.0, 1000.0), (1.5, 1100.0), (1.75, 1500.0), (2.0, 1500.0))
 RATE_HZ = 250.0
 
@@ -106,7 +110,8 @@ def assert_same_json(a, b, where="diagnosis"):
         for k, (x, y) in enumerate(zip(a, b)):
             assert_same_json(x, y, f"{where}[{k}]")
     elif isinstance(a, float) or isinstance(b, float):
-        assert math.isclose(a, b, rel_tol=JSON_RTOL, abs_tol=JSON_ATOL), (where, a, b)
+        atol = INCLUSION_ATOL if ".inclusion_probability." in where else JSON_ATOL
+        assert math.isclose(a, b, rel_tol=JSON_RTOL, abs_tol=atol), (where, a, b)
     elif isinstance(a, str) and any(c.isdigit() for c in a):
         return  # an explanation quoting rounded numbers, compared above as numbers
     else:
