@@ -6,7 +6,9 @@ Each measurement is a separate process timed from outside (wall time, peak resid
 bench/peers/measure.py), in this order:
 
   bare static     bench/peers/femstudy_run.py --analysis static on the case's cached mesh
-  cached run      femstudy run cases/middiaphysis.toml (the mesh already cached)
+  cached run      femstudy run cases/middiaphysis.toml (the mesh and, since the cold run, the
+                  kept solutions of its stiffness matrices cached: no factorisation)
+  factorising     the same with --no-kept-solutions (the mesh cached, every matrix factorised)
   cold run        the same with an empty mesh cache (TetWild included)
   resolved 16 mm  the bare static solve at 16 mm (which caches that mesh), then the case at
                   --mesh-size 16 with step_s = 1e-4 (30,000 steps over 3 s)
@@ -103,6 +105,10 @@ def main() -> None:
         timed("cold run (empty mesh cache)", femstudy_command(tree, *run), repeats=1)
         static8 = timed("bare static solve, 8 mm", bare_static(8.0, work, cache), cwd=REPO)
         cached = timed("cached run", femstudy_command(tree, *run))
+        factorising = None
+        if "no-kept-solutions" in (tree / "femstudy/commands/run.py").read_text():  # a tree with kept solutions
+            factorising = timed("cached mesh, factorising (--no-kept-solutions)",
+                                femstudy_command(tree, *run, "--no-kept-solutions"))
         static16 = timed("bare static solve, 16 mm", bare_static(16.0, work, cache), cwd=REPO)  # meshes 16 mm
         resolved = variant(tree, work, "resolved", lambda s: re.sub(r"step_s\s*=.*", "step_s = 0.0001", s))
         label = "resolved 16 mm (cached mesh): run, step 1e-4 s"
@@ -124,6 +130,9 @@ def main() -> None:
     lines += [f"| {label} | {wall:.1f} | {peak:.0f} | {message[:160]} |" for label, wall, peak, message in rows]
     lines += ["", f"cached run / bare static (8 mm): {cached[0] / static8[0]:.2f} (wall), "
                   f"{cached[1] / static8[1]:.2f} (memory); bare static 16 mm peak {static16[1]:.0f} MB"]
+    if factorising is not None:
+        lines += [f"cached mesh, factorising / bare static (8 mm): {factorising[0] / static8[0]:.2f} (wall), "
+                  f"{factorising[1] / static8[1]:.2f} (memory)"]
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

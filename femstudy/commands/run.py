@@ -19,6 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--bone", metavar="NAME", help="friction calibration for every case: human, human-printed, "
                                                  "bovine or a calibrated set (default: each case's)")
     p.add_argument("--force", action="store_true", help="run a study estimated to take very long")
+    p.add_argument("--no-kept-solutions", dest="keep_solutions", action="store_false",
+                   help="factorise even when an earlier run kept the solutions of the same stiffness "
+                        "matrices (in the cache folder; docs/solver.md)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
 
@@ -29,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
     s = args.settings
     results, table = run_cases(args.cases, out=args.out, study_out=args.study_out, mesh_size_mm=args.mesh_size,
                                cache_dir=s.cache_dir, solver=s.solver, bones_dir=s.bones_dir,
-                               bone=args.bone, force=args.force)
+                               bone=args.bone, force=args.force, keep_solutions=args.keep_solutions)
     for r in results:
         d, st = r.dynamic.peaks, r.static.peaks
         if r.hole is not None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -16,6 +17,7 @@ import scipy.sparse as sp
 from femstudy.fe import linsolve
 from femstudy.fe.assembly import FESystem
 from femstudy.fe.constraints import Constraints
+from femstudy.fe.kept import KeptSolutions
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +78,7 @@ def _free_block(system: FESystem, bc: Constraints) -> tuple[sp.csr_matrix, sp.cs
             sp.csr_matrix((system.M.data[source], free.indices, free.indptr), shape=shape))
 
 
-def factorize(system: FESystem, bc: Constraints, solver: str = "auto") -> FactorizedSystem:
+def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Path | None = None) -> FactorizedSystem:
     """Restrict the model to the free DOFs of ``bc`` and factorise K_ff.
 
     Parameters
@@ -87,6 +89,10 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto") -> Factor
         From :func:`femstudy.fe.clamp` or :func:`femstudy.fe.fix_facets`.
     solver : str
         "auto" or one of :data:`femstudy.fe.linsolve.METHODS`.
+    keep : Path, optional
+        Folder of kept solutions (:mod:`femstudy.fe.kept`): K_ff is then factorised only when
+        a solve is not served by the solutions an earlier run kept for the same K_ff, and
+        :meth:`~femstudy.fe.linsolve.Factor.close` stores the new ones.
 
     Returns
     -------
@@ -98,8 +104,11 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto") -> Factor
     >>> u = solve_static(fs, patch.force(30.0, 40.0))   # doctest: +SKIP
     """
     K, M = _free_block(system, bc)
-    factor = linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free])
-    return FactorizedSystem(system, bc, K, M, factor)
+
+    def make() -> linsolve.Factor:
+        return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free])
+
+    return FactorizedSystem(system, bc, K, M, make() if keep is None else KeptSolutions(K, make, keep))
 
 
 def solve_static(fs: FactorizedSystem, f: np.ndarray) -> np.ndarray:

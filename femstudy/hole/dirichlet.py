@@ -9,6 +9,7 @@ prescribed field of one station costs a forward/backward substitution. Units: mm
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -96,7 +97,7 @@ class PrescribedSystem:
         return u
 
 
-def factorize_prescribed(system, dofs: np.ndarray, solver: str = "auto") -> PrescribedSystem:
+def factorize_prescribed(system, dofs: np.ndarray, solver: str = "auto", keep: Path | None = None) -> PrescribedSystem:
     """Factorise K_ff with ``dofs`` prescribed (the submodel's cut boundary).
 
     Parameters
@@ -104,6 +105,7 @@ def factorize_prescribed(system, dofs: np.ndarray, solver: str = "auto") -> Pres
     system : :class:`femstudy.fe.FESystem`
     dofs : (m,) distinct DOF numbers to prescribe (enough to remove rigid-body motion)
     solver : "auto" or a linear solver of :data:`femstudy.fe.linsolve.METHODS`
+    keep : folder of kept solutions (:func:`femstudy.fe.static.factorize`), optional
 
     Returns
     -------
@@ -118,7 +120,7 @@ def factorize_prescribed(system, dofs: np.ndarray, solver: str = "auto") -> Pres
     fixed = np.sort(dofs)
     require(len(np.unique(fixed)) == len(fixed), "a DOF is prescribed twice")
     free = np.setdiff1d(np.arange(system.n_dofs), fixed)
-    fs = factorize(system, Constraints(fixed, free, np.empty(0, np.int64)), solver)
+    fs = factorize(system, Constraints(fixed, free, np.empty(0, np.int64)), solver, keep)
     return PrescribedSystem(fs, system.K[free][:, fixed].tocsr())
 
 

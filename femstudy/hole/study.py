@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -212,7 +213,7 @@ def station_tips(options: HoleOptions, drilled_depth_mm: float, cortex_mm: float
 
 
 def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options: HoleOptions = HoleOptions(),
-                  solver: str = "auto") -> HoleResult:
+                  solver: str = "auto", keep: Path | None = None) -> HoleResult:
     """Stresses near the drilled hole at a few depth stations, driven by the global model.
 
     Parameters
@@ -224,6 +225,7 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
     loading : :class:`femstudy.study.loading.CaseLoading` (conditions, static load)
     options : :class:`HoleOptions`
     solver : linear solver of the local models
+    keep : folder of kept solutions for the local models (:func:`femstudy.fe.factorize`), optional
 
     Returns
     -------
@@ -278,7 +280,9 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         cut = cut_boundary(system, unit_fields, local, station)
         patterns = hole_loads(local, station, growth_exponent=cond.growth_exponent)
         forces = np.column_stack([patterns.force(F_cut, T_cut, T_evac, F_evac), patterns.force(*static)])
-        u = factorize_prescribed(local, cut.dofs, solver).solve(cut.values @ amplitudes, forces)
+        prescribed = factorize_prescribed(local, cut.dofs, solver, keep)
+        u = prescribed.solve(cut.values @ amplitudes, forces)
+        prescribed.fs.factor.close()
         measures += distance_measures(local, station, u, options.distances_mm, up, LOADINGS)
         excluded = _excluded(local, cut.dofs, heights, up, clamp, options.cut_margin_mm)
         measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, up, excluded, LOADINGS)

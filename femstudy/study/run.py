@@ -170,7 +170,7 @@ def study_channels(system, patch, model, exclusion_radius_mm: float, clamp_lengt
 
 def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | None = None,
               cache_dir: Path = DEFAULT_CACHE_DIR, solver: str = "auto", bones_dir: Path | None = None,
-              force: bool = False) -> StudyResult:
+              force: bool = False, keep_solutions: bool = True) -> StudyResult:
     """Run the drilling study of ``case``; write its results folder when ``out_dir`` is given.
 
     Parameters
@@ -182,7 +182,7 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     mesh_size_mm : float, optional
         Overrides ``case.mesh.size_mm``.
     cache_dir : Path
-        Mesh cache folder.
+        Mesh cache folder; also holds the kept solutions (``solutions/``).
     solver : str
         "auto" or a linear solver of :data:`femstudy.fe.linsolve.METHODS`.
     bones_dir : Path, optional
@@ -190,6 +190,10 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     force : bool
         Run even when the study is estimated to take very long (one that cannot fit in
         memory is refused regardless).
+    keep_solutions : bool
+        Serve the solves from the solutions an earlier run kept for the same stiffness matrices
+        and keep this run's (:mod:`femstudy.fe.kept`): a repeated study, or one that changes only
+        the load histories, then factorises nothing. False factorises every time.
 
     Returns
     -------
@@ -222,7 +226,8 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
     channels = study_channels(system, patch, model, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
     clock["assembly"] = time.perf_counter()
-    fs = fe.factorize(system, fe.clamp(system, model.clamps), solver)
+    solutions = cache_dir / "solutions" if keep_solutions else None
+    fs = fe.factorize(system, fe.clamp(system, model.clamps), solver, keep=solutions)
     clock["factor"] = time.perf_counter()
 
     damping = (case.analysis.rayleigh_alpha_per_s, case.analysis.rayleigh_beta_s)
@@ -267,14 +272,15 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         clock["modal"] = time.perf_counter()
         if case.analysis.resolved:
             dynamics = _resolved(case, loading, fs, patch, shapes, channels, damping, dynamics)
+    fs.factor.close()  # the global solves are done: the factorisation's memory is free for the local models'
     clock["resolved"] = time.perf_counter()
 
     hole = None
     if case.loads.application == "hole":  # the global field per unit patch load drives the hole models
         from femstudy.hole.study import hole_stresses
 
-        fs.factor.close()  # the global factorisation is done with: its memory is free for the local models'
-        hole = hole_stresses(case, model, system, fs.bc.expand(shapes), loading, case.loads.hole_options(), solver)
+        hole = hole_stresses(case, model, system, fs.bc.expand(shapes), loading, case.loads.hole_options(), solver,
+                             solutions)
     clock["hole"] = time.perf_counter()
 
     summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
@@ -380,8 +386,9 @@ def _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
                     "peak_torque_Nmm": float(loading.dynamic.torque_Nmm.max()),
                     "breakthrough_s": cond.phase_times()["breakthrough"]},
         "solver": {"element_order": system.order, "dofs": system.n_dofs, "linear_solver": fs.method,
-                   "factorisations": 1 + (dynamics.scheme == "stepping") + (
+                   "factorisations": fs.factor.factorisations + (dynamics.scheme == "stepping") + (
                        dynamics.resolved_indicator is not None and np.isnan(dynamics.resolved_indicator)),
+                   "solves_from_kept_solutions": getattr(fs.factor, "served", 0),
                    "assembly": system.timings},
         "dynamics": dynamics.as_dict(),
         "results": comparison(dynamic, static),

@@ -1,0 +1,172 @@
+"""Solutions of K x = b kept between runs: a study repeated on the same model factorises nothing.
+
+A :class:`KeptSolutions` solver holds an orthonormal set of right-hand sides U (n, r) and
+their solutions Z = K⁻¹U, with each pair's residual eᵢ = ‖K zᵢ − uᵢ‖. A right-hand side b is
+served as x = Z Uᵀb when its part outside span(U) and the kept residuals bound the residual
+of x below :data:`RTOL` of ‖b‖:
+
+    ‖K x − b‖ ≤ ‖b − U Uᵀb‖ + Σᵢ |uᵢᵀb| eᵢ ≤ RTOL ‖b‖.
+
+Otherwise the matrix is factorised (once, on the first such b), the new directions of b are
+orthonormalised against U (classical Gram–Schmidt twice), solved, checked and added, and x
+comes from the grown set. Solving for orthonormal directions rather than for b itself keeps
+the bound free of any amplification by nearly dependent right-hand sides.
+
+The set is stored under the SHA-256 of K's pattern and values (:func:`fingerprint`), so only
+an identical matrix finds it; on loading, a random combination of the kept pairs is checked
+against K (one product) before any of them is used. Every solve of a repeated study — its
+static shapes, Krylov blocks and modal blocks, and the hole models' — is a combination of the
+first run's right-hand sides to round-off, and is served without a factorisation.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from femstudy.atomic import atomic_path
+from femstudy.fe.linsolve import Factor
+
+log = logging.getLogger(__name__)
+
+#: Largest bound on ‖K x − b‖ / ‖b‖ at which a kept combination serves b. A direct solve
+#: leaves 1e-10 to 1e-9 of the right-hand side here; a force 1e-8 of the load moves the
+#: model far less than the transient's accepted error indicator (femstudy.fe.transient).
+RTOL = 1e-8
+#: Directions of a right-hand side below this fraction of its norm are round-off, not solved for.
+ROUNDOFF = 1e-12
+#: Most pairs kept for one matrix (the default femur's study keeps ~100: 2 × 140 MB).
+MAX_KEPT = 160
+
+
+def fingerprint(A: sp.csr_matrix) -> str:
+    """SHA-256 of a CSR matrix's shape, pattern and values (its sorted-index form)."""
+    A = sp.csr_matrix(A)
+    if not A.has_sorted_indices:
+        A = A.sorted_indices()
+    digest = hashlib.sha256(np.array(A.shape, np.int64).tobytes())
+    for part in (A.indptr.astype(np.int64), A.indices.astype(np.int64), A.data.astype(np.float64)):
+        digest.update(np.ascontiguousarray(part).data)
+    return digest.hexdigest()[:32]
+
+
+class KeptSolutions(Factor):
+    """K⁻¹ from kept solutions of the same K, factorising only for right-hand sides they miss.
+
+    A : the SPD matrix (CSR), K_ff of a model
+    factorize : makes the solver of A when a right-hand side is missed (e.g. ``lambda:
+        linsolve.factorize(A, "auto")``)
+    folder : where the set is stored (``<fingerprint>.npz``), read at creation and written
+        by :meth:`close` when it grew
+    """
+
+    def __init__(self, A: sp.spmatrix, factorize: Callable[[], Factor], folder: Path):
+        super().__init__(A)
+        self.A = sp.csr_matrix(A)
+        self.path = Path(folder) / f"{fingerprint(self.A)}.npz"
+        self._factorize, self._factor = factorize, None
+        # column-major, MAX_KEPT columns reserved: memory only for the columns written, no copy as they grow
+        self._U, self._Z = np.empty((self.n, MAX_KEPT), order="F"), np.empty((self.n, MAX_KEPT), order="F")
+        self.e = np.zeros(0)
+        self.loaded = self.served = 0  # pairs read from the store; right-hand sides served from kept pairs
+        self._method, self._made = "", 0
+        self._read()
+
+    @property
+    def method(self) -> str:
+        """The solver that factorised A, else the one that made the kept solutions (with none
+        kept, asking factorises: the method is only known then)."""
+        return self._method or self._solver().method
+
+    @property
+    def factorisations(self) -> int:
+        return self._made
+
+    @property
+    def U(self) -> np.ndarray:
+        """The kept right-hand sides, orthonormal columns (n, r)."""
+        return self._U[:, :len(self.e)]
+
+    @property
+    def Z(self) -> np.ndarray:
+        """Their solutions K⁻¹U (n, r)."""
+        return self._Z[:, :len(self.e)]
+
+    def _read(self) -> None:
+        if not self.path.is_file():
+            return
+        try:
+            with np.load(self.path) as stored:
+                U, Z, e, method = stored["U"], stored["Z"], stored["e"], str(stored["method"])
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("ignoring unreadable kept solutions %s (%s)", self.path, exc)
+            return
+        if U.shape != Z.shape or U.shape[0] != self.n or len(e) != U.shape[1] or U.shape[1] > MAX_KEPT:
+            log.warning("ignoring kept solutions %s: they do not fit a %d-unknown matrix", self.path, self.n)
+            return
+        w = np.random.default_rng().standard_normal((U.shape[1], 2))  # K Z w = U w within the kept residuals
+        misfit = np.linalg.norm(self.A @ (Z @ w) - U @ w, axis=0)
+        if np.any(misfit > 2 * np.abs(w).T @ e + RTOL * np.linalg.norm(w, axis=0)):
+            log.warning("ignoring kept solutions %s: they do not solve this matrix", self.path)
+            return
+        self._U[:, :len(e)], self._Z[:, :len(e)] = U, Z
+        self.e, self._method = e, method
+        self.loaded = len(e)
+        log.info("%d kept solutions of this %s-unknown matrix serve its solves (%s)", self.loaded,
+                 f"{self.n:,}", self.path.name[:12])
+
+    def _solve(self, b, x0):
+        B = b.reshape(self.n, -1)
+        norms = np.linalg.norm(B, axis=0)
+        C = self.U.T @ B
+        outside = np.linalg.norm(B - self.U @ C, axis=0)
+        if np.all(outside + np.abs(C).T @ self.e <= RTOL * norms):
+            self.served += B.shape[1]
+            return (self.Z @ C).reshape(b.shape)
+        if len(self.e) + B.shape[1] > MAX_KEPT:  # the set is full: solve directly, keep nothing
+            return self._solver().solve(b, x0)
+        self._add(B, norms)
+        return (self.Z @ (self.U.T @ B)).reshape(b.shape)
+
+    def _solver(self) -> Factor:
+        if self._factor is None:
+            self._factor = self._factorize()
+            self._method, self._made = self._factor.method, self._made + 1
+        return self._factor
+
+    def _add(self, B: np.ndarray, norms: np.ndarray) -> None:
+        """Solve for the directions of B outside span(U) and keep them."""
+        W = B / np.where(norms > 0, norms, 1.0)
+        for _ in range(2):
+            W = W - self.U @ (self.U.T @ W)
+        Q, sigma, _ = np.linalg.svd(W, full_matrices=False)
+        Q = Q[:, sigma > ROUNDOFF]
+        if Q.shape[1] == 0:
+            return
+        X = self._solver().solve(Q)
+        X = X.reshape(Q.shape)
+        residual = np.linalg.norm(self.A @ X - Q, axis=0)
+        r, k = len(self.e), Q.shape[1]
+        self._U[:, r:r + k], self._Z[:, r:r + k] = Q, X
+        self.e = np.concatenate([self.e, residual])
+
+    def close(self) -> None:
+        """Store the set when it grew (atomically, beside other processes' sets), then release
+        the factorisation."""
+        if self.U.shape[1] > self.loaded:
+            with atomic_path(self.path) as tmp, open(tmp, "wb") as out:
+                np.savez(out, U=self.U, Z=self.Z, e=self.e, method=self.method)
+            self.loaded = self.U.shape[1]
+        if self._factor is not None:
+            self._factor.close()
+            self._factor = None
+
+    def describe(self) -> str:
+        if self._factor is not None:
+            return self._factor.describe()
+        return f"{self.method}: {self.n:,} unknowns, no factorisation ({self.served} solves from kept solutions)"

@@ -1,0 +1,80 @@
+"""Kept solutions (femstudy.fe.kept): a repeated solve factorises nothing and answers as a
+direct solve does; a different or corrupted store is never used."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from femstudy.fe import linsolve
+from femstudy.fe.kept import RTOL, KeptSolutions, fingerprint
+
+
+def laplacian_3d(n: int = 12) -> sp.csr_matrix:
+    """The 7-point Laplacian on an n³ grid plus a small shift: SPD, condition ~ 100 n²."""
+    one = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(n, n))
+    eye = sp.identity(n)
+    A = sp.kron(sp.kron(one, eye), eye) + sp.kron(sp.kron(eye, one), eye) + sp.kron(sp.kron(eye, eye), one)
+    return (A + 1e-3 * sp.identity(n ** 3)).tocsr()
+
+
+def kept(A, folder):
+    return KeptSolutions(A, lambda: linsolve.factorize(A, "superlu"), folder)
+
+
+def test_a_repeated_solve_is_served_without_factorising(tmp_path):
+    A = laplacian_3d()
+    rng = np.random.default_rng(1)
+    B = rng.standard_normal((A.shape[0], 3))
+    first = kept(A, tmp_path)
+    X = first.solve(B)
+    assert first.factorisations == 1
+    first.close()
+    assert (tmp_path / f"{fingerprint(A)}.npz").is_file()
+
+    second = kept(A, tmp_path)
+    assert second.loaded == 3
+    combination = B @ [0.3, -2.0, 5.0]  # any combination of kept right-hand sides
+    x = second.solve(combination)
+    assert second.factorisations == 0 and second.served == 1
+    exact = spla.spsolve(A.tocsc(), combination)
+    assert np.linalg.norm(A @ x - combination) <= RTOL * np.linalg.norm(combination)
+    assert np.allclose(x, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
+    assert np.allclose(second.solve(B), X, rtol=0, atol=1e-9 * np.abs(X).max())
+    assert second.factorisations == 0
+
+
+def test_a_new_direction_is_solved_and_kept(tmp_path):
+    A = laplacian_3d()
+    rng = np.random.default_rng(2)
+    b1, b2 = rng.standard_normal((2, A.shape[0]))
+    solver = kept(A, tmp_path)
+    solver.solve(b1)
+    x = solver.solve(b1 + b2)  # half in span, half new: one factorisation serves both
+    assert solver.factorisations == 1 and solver.U.shape[1] == 2
+    assert np.linalg.norm(A @ x - (b1 + b2)) <= RTOL * np.linalg.norm(b1 + b2)
+    assert np.allclose(solver.U.T @ solver.U, np.eye(2), atol=1e-12)
+
+
+@pytest.mark.parametrize("change", ["matrix", "store"])
+def test_a_changed_matrix_or_a_corrupted_store_is_not_used(tmp_path, change):
+    A = laplacian_3d()
+    b = np.random.default_rng(3).standard_normal(A.shape[0])
+    first = kept(A, tmp_path)
+    first.solve(b)
+    first.close()
+    if change == "matrix":  # one entry changed: another fingerprint, so the store is not found
+        A = A.copy()
+        A[0, 0] *= 1.001
+    else:  # the right name, wrong solutions: the check against A on loading refuses them
+        path = tmp_path / f"{fingerprint(A)}.npz"
+        with np.load(path) as stored:
+            parts = dict(stored)
+        parts["Z"] = parts["Z"] * 1.01
+        with open(path, "wb") as out:
+            np.savez(out, **parts)
+    second = kept(A, tmp_path)
+    assert second.loaded == 0
+    x = second.solve(b)
+    assert second.factorisations == 1
+    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
