@@ -50,7 +50,8 @@ def fingerprint(A: sp.csr_matrix) -> str:
     if not A.has_sorted_indices:
         A = A.sorted_indices()
     digest = hashlib.sha256(np.array(A.shape, np.int64).tobytes())
-    for part in (A.indptr.astype(np.int64), A.indices.astype(np.int64), A.data.astype(np.float64)):
+    for part in (A.indptr.astype(np.int64, copy=False), A.indices.astype(np.int64, copy=False),
+                 A.data.astype(np.float64, copy=False)):
         digest.update(np.ascontiguousarray(part).data)
     return digest.hexdigest()[:32]
 
@@ -70,9 +71,8 @@ class KeptSolutions(Factor):
         self.A = sp.csr_matrix(A)
         self.path = Path(folder) / f"{fingerprint(self.A)}.npz"
         self._factorize, self._factor = factorize, None
-        # column-major, MAX_KEPT columns reserved: memory only for the columns written, no copy as they grow
-        self._U, self._Z = np.empty((self.n, MAX_KEPT), order="F"), np.empty((self.n, MAX_KEPT), order="F")
-        self.e = np.zeros(0)
+        self.U, self.Z, self.e = np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros(0)
+        self._room = None  # (U, Z) buffers of MAX_KEPT columns once the set grows
         self.loaded = self.served = 0  # pairs read from the store; right-hand sides served from kept pairs
         self._method, self._made = "", 0
         self._read()
@@ -86,16 +86,6 @@ class KeptSolutions(Factor):
     @property
     def factorisations(self) -> int:
         return self._made
-
-    @property
-    def U(self) -> np.ndarray:
-        """The kept right-hand sides, orthonormal columns (n, r)."""
-        return self._U[:, :len(self.e)]
-
-    @property
-    def Z(self) -> np.ndarray:
-        """Their solutions K⁻¹U (n, r)."""
-        return self._Z[:, :len(self.e)]
 
     def _read(self) -> None:
         if not self.path.is_file():
@@ -114,8 +104,7 @@ class KeptSolutions(Factor):
         if np.any(misfit > 2 * np.abs(w).T @ e + RTOL * np.linalg.norm(w, axis=0)):
             log.warning("ignoring kept solutions %s: they do not solve this matrix", self.path)
             return
-        self._U[:, :len(e)], self._Z[:, :len(e)] = U, Z
-        self.e, self._method = e, method
+        self.U, self.Z, self.e, self._method = U, Z, e, method
         self.loaded = len(e)
         log.info("%d kept solutions of this %s-unknown matrix serve its solves (%s)", self.loaded,
                  f"{self.n:,}", self.path.name[:12])
@@ -152,7 +141,11 @@ class KeptSolutions(Factor):
         X = X.reshape(Q.shape)
         residual = np.linalg.norm(self.A @ X - Q, axis=0)
         r, k = len(self.e), Q.shape[1]
-        self._U[:, r:r + k], self._Z[:, r:r + k] = Q, X
+        if self._room is None:  # column-major: memory only for the columns written, no copy as the set grows
+            self._room = tuple(np.empty((self.n, MAX_KEPT), order="F") for _ in range(2))
+            self._room[0][:, :r], self._room[1][:, :r] = self.U, self.Z
+        self._room[0][:, r:r + k], self._room[1][:, r:r + k] = Q, X
+        self.U, self.Z = self._room[0][:, :r + k], self._room[1][:, :r + k]
         self.e = np.concatenate([self.e, residual])
 
     def close(self) -> None:
