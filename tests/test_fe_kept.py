@@ -78,3 +78,15 @@ def test_a_changed_matrix_or_a_corrupted_store_is_not_used(tmp_path, change):
     x = second.solve(b)
     assert second.factorisations == 1
     assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
+def test_a_set_over_the_size_limit_is_not_stored(tmp_path, monkeypatch):
+    from femstudy.fe import kept as kept_module
+
+    A = laplacian_3d(6)
+    monkeypatch.setattr(kept_module, "MAX_STORED_BYTES", 8 * A.shape[0])  # less than one pair
+    solver = kept(A, tmp_path)
+    x = solver.solve(np.ones(A.shape[0]))
+    solver.close()
+    assert not list(tmp_path.iterdir())
+    assert np.linalg.norm(A @ x - 1.0) <= 1e-10 * np.sqrt(A.shape[0])

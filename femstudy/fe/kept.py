@@ -40,8 +40,10 @@ log = logging.getLogger(__name__)
 RTOL = 1e-8
 #: Directions of a right-hand side below this fraction of its norm are round-off, not solved for.
 ROUNDOFF = 1e-12
-#: Most pairs kept for one matrix (the default femur's study keeps ~100: 2 × 140 MB).
+#: Most pairs kept for one matrix (the default femur's study keeps 76 global pairs: 215 MB).
 MAX_KEPT = 160
+#: Largest set stored [bytes]: a finer mesh's set would fill the disk faster than it saves time.
+MAX_STORED_BYTES = 2 ** 30
 
 
 def fingerprint(A: sp.csr_matrix) -> str:
@@ -151,7 +153,11 @@ class KeptSolutions(Factor):
     def close(self) -> None:
         """Store the set when it grew (atomically, beside other processes' sets), then release
         the factorisation."""
-        if self.U.shape[1] > self.loaded:
+        size = self.U.nbytes + self.Z.nbytes
+        if self.U.shape[1] > self.loaded and size > MAX_STORED_BYTES:
+            log.info("the solutions of this %s-unknown matrix are not kept: %.1f GB is more than %.1f GB",
+                     f"{self.n:,}", size / 1e9, MAX_STORED_BYTES / 1e9)
+        elif self.U.shape[1] > self.loaded:
             with atomic_path(self.path) as tmp, open(tmp, "wb") as out:
                 np.savez(out, U=self.U, Z=self.Z, e=self.e, method=self.method)
             self.loaded = self.U.shape[1]
