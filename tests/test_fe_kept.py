@@ -90,3 +90,27 @@ def test_a_set_over_the_size_limit_is_not_stored(tmp_path, monkeypatch):
     solver.close()
     assert not list(tmp_path.iterdir())
     assert np.linalg.norm(A @ x - 1.0) <= 1e-10 * np.sqrt(A.shape[0])
+
+
+def test_a_set_grown_from_another_runs_right_hand_sides_stays_orthonormal_and_exact(tmp_path):
+    """A run keeps two right-hand sides that are combinations of six unit loads up to round-off
+    (1e-9: another run's unit fields); a later run asks for the six: the set grows by their
+    other directions, stays orthonormal, and a third run is served the six exactly."""
+    A = laplacian_3d()
+    rng = np.random.default_rng(4)
+    B6 = rng.standard_normal((A.shape[0], 6))
+    B2 = B6 @ rng.standard_normal((6, 2)) + 1e-9 * rng.standard_normal((A.shape[0], 2))
+    exact = spla.spsolve(A.tocsc(), B6)
+    first = kept(A, tmp_path)
+    first.solve(B2)
+    first.close()
+    grown = kept(A, tmp_path)
+    X = grown.solve(B6)
+    assert np.allclose(grown.U.T @ grown.U, np.eye(grown.U.shape[1]), rtol=0, atol=1e-12)
+    grown.close()
+    served = kept(A, tmp_path)
+    assert served.loaded == grown.U.shape[1]
+    again = served.solve(B6)
+    assert served.factorisations == 0
+    for x in (X, again):
+        assert np.abs(x - exact).max() <= 1e-9 * np.abs(exact).max()

@@ -38,8 +38,9 @@ log = logging.getLogger(__name__)
 #: leaves 1e-10 to 1e-9 of the right-hand side here; a force 1e-8 of the load moves the
 #: model far less than the transient's accepted error indicator (femstudy.fe.transient).
 RTOL = 1e-8
-#: Directions of a right-hand side below this fraction of its norm are round-off, not solved for.
-ROUNDOFF = 1e-12
+#: Directions of a right-hand side below this fraction of its norm are not solved for: they
+#: are round-off of directions already kept, well inside the bound's RTOL.
+NEGLIGIBLE = 1e-10
 #: Most pairs kept for one matrix (the default femur's study keeps 76 global pairs: 215 MB).
 MAX_KEPT = 160
 #: Largest set stored [bytes]: a finer mesh's set would fill the disk faster than it saves time.
@@ -101,10 +102,13 @@ class KeptSolutions(Factor):
         if U.shape != Z.shape or U.shape[0] != self.n or len(e) != U.shape[1] or U.shape[1] > MAX_KEPT:
             log.warning("ignoring kept solutions %s: they do not fit a %d-unknown matrix", self.path, self.n)
             return
-        w = np.random.default_rng().standard_normal((U.shape[1], 2))  # K Z w = U w within the kept residuals
-        misfit = np.linalg.norm(self.A @ (Z @ w) - U @ w, axis=0)
-        if np.any(misfit > 2 * np.abs(w).T @ e + RTOL * np.linalg.norm(w, axis=0)):
-            log.warning("ignoring kept solutions %s: they do not solve this matrix", self.path)
+        # on random combinations w: U orthonormal (‖U w‖ = ‖w‖) and K Z w = U w within the kept residuals
+        w = np.random.default_rng().standard_normal((U.shape[1], 2))
+        Uw, size = U @ w, np.linalg.norm(w, axis=0)
+        misfit = np.linalg.norm(self.A @ (Z @ w) - Uw, axis=0)
+        if np.any(np.abs(np.linalg.norm(Uw, axis=0) - size) > 1e-10 * size) or \
+                np.any(misfit > 2 * np.abs(w).T @ e + RTOL * size):
+            log.warning("ignoring kept solutions %s: they fail the check against this matrix", self.path)
             return
         self.U, self.Z, self.e, self._method = U, Z, e, method
         self.loaded = len(e)
@@ -119,10 +123,13 @@ class KeptSolutions(Factor):
         if np.all(outside + np.abs(C).T @ self.e <= RTOL * norms):
             self.served += B.shape[1]
             return (self.Z @ C).reshape(b.shape)
-        if len(self.e) + B.shape[1] > MAX_KEPT:  # the set is full: solve directly, keep nothing
-            return self._solver().solve(b, x0)
-        self._add(B, norms)
-        return (self.Z @ (self.U.T @ B)).reshape(b.shape)
+        if len(self.e) + B.shape[1] <= MAX_KEPT:
+            self._add(B, norms)
+            C = self.U.T @ B
+            bound = np.linalg.norm(B - self.U @ C, axis=0) + np.abs(C).T @ self.e
+            if np.all(bound <= RTOL * norms):
+                return (self.Z @ C).reshape(b.shape)
+        return self._solver().solve(b, x0)  # the set is full, or (never seen) its grown combination fails the bound
 
     def _solver(self) -> Factor:
         if self._factor is None:
@@ -136,9 +143,13 @@ class KeptSolutions(Factor):
         for _ in range(2):
             W = W - self.U @ (self.U.T @ W)
         Q, sigma, _ = np.linalg.svd(W, full_matrices=False)
-        Q = Q[:, sigma > ROUNDOFF]
+        Q = Q[:, sigma > NEGLIGIBLE]
         if Q.shape[1] == 0:
             return
+        # a direction of singular value σ is orthogonal to U only to ~1e-16/σ: once more, then
+        # orthonormalise (a right-hand side kept by another run differs from this run's by
+        # round-off, so nearly-in-span directions of σ ~ 1e-8 do occur)
+        Q = np.linalg.qr(Q - self.U @ (self.U.T @ Q))[0]
         X = self._solver().solve(Q)
         X = X.reshape(Q.shape)
         residual = np.linalg.norm(self.A @ X - Q, axis=0)
