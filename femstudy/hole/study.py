@@ -276,13 +276,19 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         station = hole.at_station(k)
         local = assemble(station.mesh, materials, order=case.mesh.order, long_axis=up)
         t, F_cut, T_cut, F_evac, T_evac = station_amplitudes(cond, float(tip), scale)
-        amplitudes = np.array([[F_cut + F_evac, T_cut + T_evac], list(static)]).T  # (2 patch loads, 2 loadings)
         cut = cut_boundary(system, unit_fields, local, station)
         patterns = hole_loads(local, station, growth_exponent=cond.growth_exponent)
-        forces = np.column_stack([patterns.force(F_cut, T_cut, T_evac, F_evac), patterns.force(*static)])
+        # the unit responses: the cut faces under the global field of a unit patch thrust and
+        # torque, and each unit hole load with the cut faces held; any loading combines them,
+        # so kept solutions serve a study that changes only the loads
+        n_cut, n_hole = cut.values.shape[1], patterns.patterns.shape[1]
         prescribed = factorize_prescribed(local, cut.dofs, solver, keep)
-        u = prescribed.solve(cut.values @ amplitudes, forces)
+        unit = prescribed.solve(np.hstack([cut.values, np.zeros((len(cut.dofs), n_hole))]),
+                                np.hstack([np.zeros((local.n_dofs, n_cut)), patterns.patterns]))
         prescribed.fs.factor.close()
+        loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order
+                             [*static, *static, 0.0, 0.0]]).T  # (patch thrust, torque, 4 hole loads) × 2 loadings
+        u = unit @ loadings
         measures += distance_measures(local, station, u, options.distances_mm, up, LOADINGS)
         excluded = _excluded(local, cut.dofs, heights, up, clamp, options.cut_margin_mm)
         measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, up, excluded, LOADINGS)
