@@ -167,17 +167,22 @@ def test_doubling_the_loads_doubles_the_response(tmp_path, mesh_cache):
 
 def test_a_repeated_study_factorises_nothing_and_gives_the_same_maxima(tmp_path, mesh_cache):
     """Kept solutions (femstudy.fe.kept): a study with new load amplitudes on a model solved
-    before is served without a factorisation, and its maxima, frequencies and resolved peak
-    are those of a study that factorises (here twice the loads: exactly twice the response)."""
+    before is served without a factorisation, global or local, and its maxima, frequencies,
+    resolved peak and hole stresses are those of a study that factorises (here twice the
+    loads: exactly twice the response)."""
     import shutil
 
     shutil.rmtree(mesh_cache / "solutions", ignore_errors=True)
-    common = dict(order=2, step=0.5, screenshot="false", fields="false", resolved="true")
+    common = dict(order=2, step=0.5, screenshot="false", fields="false", resolved="true", application="hole")
     plain, _ = run(tmp_path, mesh_cache, scale=1.0, name="plain", keep_solutions=False, **common)
     first, _ = run(tmp_path, mesh_cache, scale=1.0, name="first", **common)
     again, _ = run(tmp_path, mesh_cache, scale=2.0, name="again", **common)
     assert (plain["solver"]["factorisations"], first["solver"]["factorisations"]) == (1, 1)
     assert again["solver"]["factorisations"] == 0 and again["solver"]["solves_from_kept_solutions"] > 0
+    assert (first["solver"]["hole_factorisations"], again["solver"]["hole_factorisations"]) == (1, 0)
+    for loading in ("dynamic", "static"):
+        assert again["hole"]["headline"][loading]["von_mises_MPa"] == pytest.approx(
+            2 * plain["hole"]["headline"][loading]["von_mises_MPa"], rel=1e-9)
     for quantity in ("max_deflection_mm", "drill_point_deflection_mm", "max_von_mises_MPa", "max_von_mises_excl_MPa"):
         for loading in ("dynamic", "static"):
             reference = plain["results"][quantity][loading]["value"]

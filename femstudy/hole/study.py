@@ -83,6 +83,7 @@ class StationRun:
     tip_depth_mm, time_s : the drill tip's depth and the time the dynamic loading reaches it
     cutting_thrust_N, cutting_torque_Nmm, evacuation_thrust_N, evacuation_torque_Nmm : dynamic amplitudes
     dofs : P2 DOFs of the local model; cut_dofs : of them prescribed
+    factorisations : of the local model (0 when kept solutions served its solves, femstudy.fe.kept)
     seconds : mesh station + assembly + factorisation + solves + measures [s]
     moved_mm : largest distance a cut node was moved onto the femur mesh
     """
@@ -98,6 +99,7 @@ class StationRun:
     cut_dofs: int
     seconds: float
     moved_mm: float
+    factorisations: int
 
 
 @dataclass(frozen=True)
@@ -286,6 +288,7 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         unit = prescribed.solve(np.hstack([cut.values, np.zeros((len(cut.dofs), n_hole))]),
                                 np.hstack([np.zeros((local.n_dofs, n_cut)), patterns.patterns]))
         prescribed.fs.factor.close()
+        factorisations = prescribed.fs.factor.factorisations
         loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order
                              [*static, *static, 0.0, 0.0]]).T  # (patch thrust, torque, 4 hole loads) × 2 loadings
         u = unit @ loadings
@@ -294,7 +297,7 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, up, excluded, LOADINGS)
         seconds = time.perf_counter() - start
         runs.append(StationRun(k, float(tip), t, F_cut, T_cut, F_evac, T_evac, local.n_dofs, len(cut.dofs), seconds,
-                               cut.moved_mm))
+                               cut.moved_mm, factorisations))
         log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
     return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds, axis_bottom)
 

@@ -285,6 +285,7 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
 
     summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
     if hole is not None:  # the hole's measures replace the patch's mesh-dependent peak for margins
+        summary["solver"]["hole_factorisations"] = sum(s.factorisations for s in hole.stations)
         summary["hole"] = hole.to_json()
         summary["hole"]["convergence"] = verdicts.applicable(record, verdicts.conditions(case))
         summary["margins"] = summary["hole"]["margins"] = verdicts.gate(hole.margins(), summary["hole"]["convergence"])
