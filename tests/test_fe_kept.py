@@ -114,3 +114,11 @@ def test_a_set_grown_from_another_runs_right_hand_sides_stays_orthonormal_and_ex
     assert served.factorisations == 0
     for x in (X, again):
         assert np.abs(x - exact).max() <= 1e-9 * np.abs(exact).max()
+
+
+def test_the_run_command_can_turn_kept_solutions_off():
+    from femstudy.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["run", "case.toml"]).keep_solutions is True
+    assert parser.parse_args(["run", "case.toml", "--no-kept-solutions"]).keep_solutions is False
