@@ -122,3 +122,19 @@ def test_the_run_command_can_turn_kept_solutions_off():
     parser = build_parser()
     assert parser.parse_args(["run", "case.toml"]).keep_solutions is True
     assert parser.parse_args(["run", "case.toml", "--no-kept-solutions"]).keep_solutions is False
+
+
+def test_an_unreadable_store_or_an_unwritable_folder_costs_a_factorisation_not_the_run(tmp_path):
+    A = laplacian_3d(6)
+    b = np.ones(A.shape[0])
+    (tmp_path / f"{fingerprint(A)}.npz").write_bytes(b"PK\x03\x04 not a zip archive")
+    solver = kept(A, tmp_path)
+    assert solver.loaded == 0
+    x = solver.solve(b)
+    assert solver.factorisations == 1 and np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    solver = kept(A, blocked / "solutions")  # its parent is a file: nothing can be stored there
+    solver.solve(b)
+    solver.close()
+    assert not (blocked / "solutions").exists()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import zipfile
 from pathlib import Path
 from typing import Callable
 
@@ -96,7 +97,7 @@ class KeptSolutions(Factor):
         try:
             with np.load(self.path) as stored:
                 U, Z, e, method = stored["U"], stored["Z"], stored["e"], str(stored["method"])
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             log.warning("ignoring unreadable kept solutions %s (%s)", self.path, exc)
             return
         if U.shape != Z.shape or U.shape[0] != self.n or len(e) != U.shape[1] or U.shape[1] > MAX_KEPT:
@@ -169,9 +170,12 @@ class KeptSolutions(Factor):
             log.info("the solutions of this %s-unknown matrix are not kept: %.1f GB is more than %.1f GB",
                      f"{self.n:,}", size / 1e9, MAX_STORED_BYTES / 1e9)
         elif self.U.shape[1] > self.loaded:
-            with atomic_path(self.path) as tmp, open(tmp, "wb") as out:
-                np.savez(out, U=self.U, Z=self.Z, e=self.e, method=self.method)
-            self.loaded = self.U.shape[1]
+            try:
+                with atomic_path(self.path) as tmp, open(tmp, "wb") as out:
+                    np.savez(out, U=self.U, Z=self.Z, e=self.e, method=self.method)
+                self.loaded = self.U.shape[1]
+            except OSError as exc:  # a read-only or full cache costs the next run a factorisation, not this run
+                log.warning("could not keep the solutions in %s (%s)", self.path.parent, exc)
         if self._factor is not None:
             self._factor.close()
             self._factor = None
