@@ -10,6 +10,10 @@ Typical use (docs/solver.md)::
     u = solve_static(fs, patch.force(thrust_N, torque_Nmm))
     march = solve_transient(fs, patch.patterns, np.column_stack([F, T]), times_s)
     modes = solve_modal(fs, k=6)
+
+``factorize(..., keep=folder)`` serves the solves from solutions an earlier run kept for the
+same K_ff and factorises only on a miss (:mod:`femstudy.fe.kept`); ``fs.factor.close()``
+stores the new ones.
 """
 
 from femstudy.fe.assembly import FESystem, assemble
