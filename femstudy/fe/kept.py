@@ -8,8 +8,8 @@ of x below :data:`RTOL` of ‖b‖:
     ‖K x − b‖ ≤ ‖b − U Uᵀb‖ + Σᵢ |uᵢᵀb| eᵢ ≤ RTOL ‖b‖.
 
 Otherwise the matrix is factorised (once, on the first such b), the new directions of b are
-orthonormalised against U (classical Gram–Schmidt twice), solved, checked and added, and x
-comes from the grown set. Solving for orthonormal directions rather than for b itself keeps
+orthonormalised against U (:func:`~femstudy.fe.subspace.orthonormal_complement`), solved,
+checked and added, and x comes from the grown set. Solving for orthonormal directions rather than for b itself keeps
 the bound free of any amplification by nearly dependent right-hand sides.
 
 The set is stored under the SHA-256 of K's pattern and values (:func:`fingerprint`), so only
@@ -32,6 +32,7 @@ import scipy.sparse as sp
 
 from femstudy.atomic import atomic_path
 from femstudy.fe.linsolve import Factor
+from femstudy.fe.subspace import orthonormal_complement
 
 log = logging.getLogger(__name__)
 
@@ -118,19 +119,22 @@ class KeptSolutions(Factor):
 
     def _solve(self, b, x0):
         B = b.reshape(self.n, -1)
-        norms = np.linalg.norm(B, axis=0)
-        C = self.U.T @ B
-        outside = np.linalg.norm(B - self.U @ C, axis=0)
-        if np.all(outside + np.abs(C).T @ self.e <= RTOL * norms):
+        C, served = self._combination(B)
+        if served:
             self.served += B.shape[1]
             return (self.Z @ C).reshape(b.shape)
         if len(self.e) + B.shape[1] <= MAX_KEPT:
-            self._add(B, norms)
-            C = self.U.T @ B
-            bound = np.linalg.norm(B - self.U @ C, axis=0) + np.abs(C).T @ self.e
-            if np.all(bound <= RTOL * norms):
+            self._add(B)
+            C, served = self._combination(B)
+            if served:
                 return (self.Z @ C).reshape(b.shape)
         return self._solver().solve(b, x0)  # the set is full, or (never seen) its grown combination fails the bound
+
+    def _combination(self, B: np.ndarray) -> tuple[np.ndarray, bool]:
+        """C = UᵀB, and whether x = Z C meets the residual bound for every column of B."""
+        C = self.U.T @ B
+        bound = np.linalg.norm(B - self.U @ C, axis=0) + np.abs(C).T @ self.e
+        return C, bool(np.all(bound <= RTOL * np.linalg.norm(B, axis=0)))
 
     def _solver(self) -> Factor:
         if self._factor is None:
@@ -138,13 +142,10 @@ class KeptSolutions(Factor):
             self._method, self._made = self._factor.method, self._made + 1
         return self._factor
 
-    def _add(self, B: np.ndarray, norms: np.ndarray) -> None:
+    def _add(self, B: np.ndarray) -> None:
         """Solve for the directions of B outside span(U) and keep them."""
-        W = B / np.where(norms > 0, norms, 1.0)
-        for _ in range(2):
-            W = W - self.U @ (self.U.T @ W)
-        Q, sigma, _ = np.linalg.svd(W, full_matrices=False)
-        Q = Q[:, sigma > NEGLIGIBLE]
+        norms = np.linalg.norm(B, axis=0)
+        Q = orthonormal_complement(self.U, B / np.where(norms > 0, norms, 1.0), NEGLIGIBLE)
         if Q.shape[1] == 0:
             return
         # a direction of singular value σ is orthogonal to U only to ~1e-16/σ: once more, then

@@ -86,8 +86,8 @@ class Factor:
     """A solver for one SPD matrix: ``solve(b)`` for b of shape (n,) or (n, k)."""
 
     method = ""
-    #: Factorisations made (a kept-solutions solver may make none).
-    factorisations = 1
+    #: Factorisations made, and right-hand sides served without one (femstudy.fe.kept).
+    factorisations, served = 1, 0
 
     def __init__(self, A: sp.spmatrix):
         self.n = A.shape[0]

@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 
-def orthonormal_complement(V: np.ndarray, W: np.ndarray) -> np.ndarray:
+def orthonormal_complement(V: np.ndarray, W: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
     """Orthonormal columns spanning what W adds to span(V) (V orthonormal); directions under
-    1e-12 of W's own size are round-off and dropped."""
+    ``rtol`` of W's own size are round-off and dropped."""
     scale = np.linalg.norm(W, axis=0).max()
     for _ in range(2):  # classical Gram–Schmidt twice is orthogonal to working precision
         W = W - V @ (V.T @ W)
     U, sigma, _ = np.linalg.svd(W, full_matrices=False)
-    return U[:, sigma > 1e-12 * scale]
+    return U[:, sigma > rtol * scale]
 
 
 def symmetric(A: np.ndarray) -> np.ndarray:

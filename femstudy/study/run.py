@@ -389,7 +389,7 @@ def _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
         "solver": {"element_order": system.order, "dofs": system.n_dofs, "linear_solver": fs.method,
                    "factorisations": fs.factor.factorisations + (dynamics.scheme == "stepping") + (
                        dynamics.resolved_indicator is not None and np.isnan(dynamics.resolved_indicator)),
-                   "solves_from_kept_solutions": getattr(fs.factor, "served", 0),
+                   "solves_from_kept_solutions": fs.factor.served,
                    "assembly": system.timings},
         "dynamics": dynamics.as_dict(),
         "results": comparison(dynamic, static),
