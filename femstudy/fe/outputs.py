@@ -99,13 +99,15 @@ def _block(p: int, r: int) -> int:
 
 def _evaluate(W: np.ndarray, Y: np.ndarray, steps: np.ndarray, masks: dict):
     """Per mask, the maximum over its points and where, at each of ``steps`` (blocked)."""
-    p, r, _ = W.shape
+    p, r, m = W.shape
+    rows = W.reshape(p * r, m)  # one matrix product per block, not one per point
     best = {name: (np.full(len(steps), -np.inf), np.zeros(len(steps), np.int64)) for name in masks}
+    everywhere = {name: bool(mask.all()) for name, mask in masks.items()}
     for start in range(0, len(steps), _block(p, r)):
         cols = steps[start:start + _block(p, r)]
-        values = _norms(W @ Y[:, cols])  # (p, len(cols))
+        values = _norms((rows @ Y[:, cols]).reshape(p, r, len(cols)))  # (p, len(cols))
         for name, mask in masks.items():
-            sub = np.where(mask[:, None], values, -np.inf)
+            sub = values if everywhere[name] else np.where(mask[:, None], values, -np.inf)
             k = sub.argmax(axis=0)
             best[name][0][start:start + len(cols)] = sub[k, np.arange(len(cols))]
             best[name][1][start:start + len(cols)] = k
