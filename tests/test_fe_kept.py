@@ -138,3 +138,43 @@ def test_an_unreadable_store_or_an_unwritable_folder_costs_a_factorisation_not_t
     solver.solve(b)
     solver.close()
     assert not (blocked / "solutions").exists()
+
+
+def test_modes_are_kept_beside_the_solutions_and_checked_before_use(tmp_path, caplog):
+    """femstudy.fe.modal: a second analysis of the same K and M reads its modes back (no
+    iteration, no factorisation); a store that fails the residual check, or a changed mass
+    matrix, costs an analysis, never a wrong mode."""
+    from dataclasses import replace
+
+    from fe_cases import LENGTH, R_IN, R_OUT, clamped_both_ends, tube
+    from femstudy.fe import assemble, factorize, solve_modal
+    from femstudy.fe.geometry import tube_mesh
+    from femstudy.materials import BoneMaterials
+
+    system = tube(1, 12, 12, 2)
+    bc = clamped_both_ends(system)
+    plain = solve_modal(factorize(system, bc), k=4)
+    first = solve_modal(factorize(system, bc, "superlu", keep=tmp_path), k=4)
+    fs = factorize(system, bc, "superlu", keep=tmp_path)
+    again = solve_modal(fs, k=4)
+    assert (plain.kept, first.kept, again.kept) == (False, False, True)
+    assert fs.factor.factorisations == 0 and fs.factor.served == 0  # not even a kept solve
+    assert np.array_equal(again.frequency_Hz, first.frequency_Hz) and np.array_equal(again.shapes, first.shapes)
+    assert again.frequency_Hz == pytest.approx(plain.frequency_Hz, rel=1e-8)  # another solver's analysis
+
+    (store,) = tmp_path.glob("*-modes4-*.npz")
+    with np.load(store) as stored:
+        parts = dict(stored)
+    parts["omega2"] = parts["omega2"] * 1.001  # a frequency 0.05 % off fails the residual check
+    with open(store, "wb") as out:
+        np.savez(out, **parts)
+    redone = solve_modal(factorize(system, bc, "superlu", keep=tmp_path), k=4)
+    assert not redone.kept and "fail the check" in caplog.text
+    assert redone.frequency_Hz == pytest.approx(plain.frequency_Hz, rel=1e-8)
+
+    bone = BoneMaterials()
+    heavy = replace(bone, cortical=replace(bone.cortical, density_t_mm3=2 * bone.cortical.density_t_mm3))
+    heavier = assemble(tube_mesh(LENGTH, R_OUT, R_IN, 1, 12, 12), heavy, order=2)
+    moved = solve_modal(factorize(heavier, clamped_both_ends(heavier), "superlu", keep=tmp_path), k=4)
+    assert not moved.kept and len(list(tmp_path.glob("*-modes4-*.npz"))) == 2
+    assert moved.frequency_Hz[0] < 0.9 * plain.frequency_Hz[0]

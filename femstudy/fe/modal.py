@@ -8,17 +8,26 @@ exact to ~1e-12).
 ARPACK's shift-invert Lanczos (``scipy.sparse.linalg.eigsh``) needs the same factorisation
 but one single-vector solve per step, about 30 for 6 modes of the femur; the block method
 needs 3–5 block solves. With K in N/mm and M in tonne, ω² comes out in 1/s².
+
+With kept solutions (:func:`femstudy.fe.factorize` with ``keep``), the modes are kept too,
+beside them: an analysis of the same K_ff and M_ff (their fingerprints) for the same number of
+modes reads the pairs back and uses them when every one passes the same residual check and
+they are M-orthonormal to 1e-8; otherwise it computes and stores them.
 """
 
 from __future__ import annotations
 
 import logging
+import zipfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.linalg
 
+from femstudy.atomic import atomic_path
 from femstudy.errors import require
+from femstudy.fe.kept import KeptSolutions, fingerprint
 from femstudy.fe.static import FactorizedSystem
 from femstudy.fe.subspace import grow_projection, orthonormal_complement, symmetric
 
@@ -26,14 +35,20 @@ log = logging.getLogger(__name__)
 
 #: Relative change of the Ritz values between blocks below which the residuals are checked.
 RITZ_SETTLED = 1e-9
+#: Largest relative residual of a mode accepted when the iteration stops short of ``rtol``.
+LARGEST_RESIDUAL = 1e-4
+#: Largest ‖ΦᵀMΦ − I‖ (entries) of kept mode shapes that are used.
+KEPT_ORTHONORMALITY = 1e-8
 
 
 @dataclass(frozen=True)
 class Modes:
-    """frequency_Hz (k,), ascending; shapes (n_dofs, k) M-orthonormal, zero on the clamps."""
+    """frequency_Hz (k,), ascending; shapes (n_dofs, k) M-orthonormal, zero on the clamps;
+    kept: read back from an earlier analysis of the same matrices (module docstring)."""
 
     frequency_Hz: np.ndarray
     shapes: np.ndarray
+    kept: bool = False
 
     @property
     def period_s(self) -> np.ndarray:
@@ -58,6 +73,23 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks
     """
     n = fs.n_free
     require(1 <= k < n, f"cannot compute {k} modes of a model with {n} free DOFs")
+    store = _kept_path(fs, k)
+    kept = None if store is None else _read_kept(fs, store, k, rtol)
+    if kept is not None:
+        omega2, phi = kept
+    else:
+        omega2, phi = _block_krylov(fs, k, rtol, max_blocks)
+        if store is not None:
+            _keep(store, omega2, phi)
+    frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi)
+    log.info("natural frequencies: %s Hz%s", ", ".join(f"{f:.1f}" for f in frequencies),
+             " (kept from an earlier analysis of this model)" if kept is not None else "")
+    return Modes(frequencies, fs.bc.expand(phi), kept is not None)
+
+
+def _block_krylov(fs: FactorizedSystem, k: int, rtol: float, max_blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest k Ritz pairs (ω² [1/s²], φ on the free DOFs) of the block shift-invert Krylov space."""
+    n = fs.n_free
     block = min(k + 2, n - 1)
     X = np.random.default_rng(0).standard_normal((n, block))
     space = np.empty((n, min(n, max_blocks * block)), order="F")  # the basis grows in place, column-major
@@ -91,14 +123,50 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks
     if residual is None:
         phi = V @ Phi
         residual = _residuals(fs, phi, omega2)
-    require(residual.max() <= max(rtol, 1e-4), f"the lowest {k} modes did not converge (relative residual "
+    require(residual.max() <= max(rtol, LARGEST_RESIDUAL), f"the lowest {k} modes did not converge (relative residual "
                                                f"{residual.max():.1e} after {V.shape[1]} vectors)")
-    frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi)
-    log.info("natural frequencies: %s Hz", ", ".join(f"{f:.1f}" for f in frequencies))
-    return Modes(frequencies, fs.bc.expand(phi))
+    return omega2, phi
 
 
-def _residuals(fs: FactorizedSystem, phi: np.ndarray, omega2: np.ndarray) -> np.ndarray:
-    """‖Kφ − ω²Mφ‖ / ‖Kφ‖ of each Ritz pair."""
-    stiffness = fs.K @ phi
-    return np.linalg.norm(stiffness - fs.mass(phi) * omega2, axis=0) / np.linalg.norm(stiffness, axis=0)
+def _residuals(fs: FactorizedSystem, phi: np.ndarray, omega2: np.ndarray, with_mass: bool = False):
+    """‖Kφ − ω²Mφ‖ / ‖Kφ‖ of each Ritz pair (and Mφ with ``with_mass``)."""
+    stiffness, mass = fs.K @ phi, fs.mass(phi)
+    residual = np.linalg.norm(stiffness - mass * omega2, axis=0) / np.linalg.norm(stiffness, axis=0)
+    return (residual, mass) if with_mass else residual
+
+
+def _kept_path(fs: FactorizedSystem, k: int) -> Path | None:
+    """Where the k modes of fs's K_ff and M_ff are kept: beside its kept solutions, if any."""
+    if not isinstance(fs.factor, KeptSolutions):
+        return None
+    return fs.factor.path.with_name(f"{fs.factor.path.stem}-modes{k}-{fingerprint(fs.M)[:16]}.npz")
+
+
+def _read_kept(fs: FactorizedSystem, path: Path, k: int, rtol: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Kept (ω², φ) that fit fs and pass the checks a computed result passes (residuals, as
+    :func:`_block_krylov` accepts them) and M-orthonormality, else None."""
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as stored:
+            omega2, phi = stored["omega2"], stored["phi"]
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        log.warning("ignoring unreadable kept modes %s (%s)", path, exc)
+        return None
+    if omega2.shape != (k,) or phi.shape != (fs.n_free, k):
+        log.warning("ignoring kept modes %s: they do not fit this model", path)
+        return None
+    residual, mass = _residuals(fs, phi, omega2, with_mass=True)
+    gram = phi.T @ mass
+    if residual.max() > max(rtol, LARGEST_RESIDUAL) or np.abs(gram - np.eye(k)).max() > KEPT_ORTHONORMALITY or np.any(np.diff(omega2) < 0):
+        log.warning("ignoring kept modes %s: they fail the check against this model", path)
+        return None
+    return omega2, phi
+
+
+def _keep(path: Path, omega2: np.ndarray, phi: np.ndarray) -> None:
+    try:
+        with atomic_path(path) as tmp, open(tmp, "wb") as out:
+            np.savez(out, omega2=omega2, phi=phi)
+    except OSError as exc:  # a read-only or full cache costs the next analysis its iterations, not this run
+        log.warning("could not keep the modes in %s (%s)", path.parent, exc)
