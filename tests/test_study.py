@@ -42,11 +42,11 @@ screenshot = {screenshot}
 
 
 def run(tmp_path, mesh_cache, order=2, scale=1.0, step=0.5, screenshot="true", name="run", fields="true",
-        resolved="false", application="surface_patch", keep_solutions=True):
+        resolved="false", application="surface_patch", keep_solutions=True, parallel=True):
     case = parse_case(CASE.format(order=order, scale=scale, step=step, screenshot=screenshot, fields=fields,
                                   resolved=resolved, application=application))
     out = tmp_path / name
-    result = run_study(case, out, cache_dir=mesh_cache, keep_solutions=keep_solutions)
+    result = run_study(case, out, cache_dir=mesh_cache, keep_solutions=keep_solutions, parallel=parallel)
     return result.to_json(), out
 
 
@@ -167,19 +167,24 @@ def test_doubling_the_loads_doubles_the_response(tmp_path, mesh_cache):
 
 def test_a_repeated_study_factorises_nothing_and_gives_the_same_maxima(tmp_path, mesh_cache):
     """Kept solutions (femstudy.fe.kept): a study with new load amplitudes on a model solved
-    before is served without a factorisation, global or local, and its maxima, frequencies,
-    resolved peak and hole stresses are those of a study that factorises (here twice the
-    loads: exactly twice the response)."""
+    before is served without a factorisation, global or local, and with the modes kept, and its
+    maxima, frequencies, resolved peak and hole stresses are those of a study that factorises
+    (here twice the loads: exactly twice the response). The study that factorises runs in one
+    process, the others in lanes (femstudy.lanes) where they fork: the same numbers either way."""
     import shutil
+
+    from femstudy.lanes import can_fork
 
     shutil.rmtree(mesh_cache / "solutions", ignore_errors=True)
     common = dict(order=2, step=0.5, screenshot="false", fields="false", resolved="true", application="hole")
-    plain, _ = run(tmp_path, mesh_cache, scale=1.0, name="plain", keep_solutions=False, **common)
+    plain, _ = run(tmp_path, mesh_cache, scale=1.0, name="plain", keep_solutions=False, parallel=False, **common)
     first, _ = run(tmp_path, mesh_cache, scale=1.0, name="first", **common)
     again, _ = run(tmp_path, mesh_cache, scale=2.0, name="again", **common)
     assert (plain["solver"]["factorisations"], first["solver"]["factorisations"]) == (1, 1)
     assert again["solver"]["factorisations"] == 0 and again["solver"]["solves_from_kept_solutions"] > 0
     assert (first["solver"]["hole_factorisations"], again["solver"]["hole_factorisations"]) == (1, 0)
+    assert [s["dynamics"]["modes_kept"] for s in (plain, first, again)] == [False, False, True]
+    assert [s["timings"]["parallel"] for s in (plain, first, again)] == [False, can_fork(), can_fork()]
     for loading in ("dynamic", "static"):
         assert again["hole"]["headline"][loading]["von_mises_MPa"] == pytest.approx(
             2 * plain["hole"]["headline"][loading]["von_mises_MPa"], rel=1e-9)

@@ -22,6 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-kept-solutions", dest="keep_solutions", action="store_false",
                    help="factorise even when an earlier run kept the solutions of the same stiffness "
                         "matrices (in the cache folder; docs/solver.md)")
+    p.add_argument("--serial", dest="parallel", action="store_false",
+                   help="run every part of the study in this process (by default the hole models and the "
+                        "writing of figures and fields run in forked processes beside the global analyses)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
 
@@ -32,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     s = args.settings
     results, table = run_cases(args.cases, out=args.out, study_out=args.study_out, mesh_size_mm=args.mesh_size,
                                cache_dir=s.cache_dir, solver=s.solver, bones_dir=s.bones_dir,
-                               bone=args.bone, force=args.force, keep_solutions=args.keep_solutions)
+                               bone=args.bone, force=args.force, keep_solutions=args.keep_solutions, parallel=args.parallel)
     for r in results:
         d, st = r.dynamic.peaks, r.static.peaks
         if r.hole is not None:

@@ -1,4 +1,7 @@
-"""The results folder of a study: tables, figures, fields and the report, written atomically."""
+"""The files of a study's results folder: figures and picture, tables, fields and the report.
+
+They are written into the folder being built (:func:`femstudy.atomic.atomic_folder`, opened by
+:func:`femstudy.study.run.run_study`), the pictures possibly by another process (:mod:`femstudy.lanes`)."""
 
 from __future__ import annotations
 
@@ -8,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from femstudy import atomic
 from femstudy.fe.post import nodal_average
 from femstudy.jsonable import default
 from femstudy.study import fields, figures, render, report
@@ -23,39 +25,48 @@ def _von_mises_vertices(system, vm_rows: np.ndarray, coordinates: np.ndarray) ->
     return nodal_average(system, vm.reshape(system.n_tets, -1))
 
 
-def write_results(out_dir: Path, result, model, system, basis, vm_rows, static_u, kept: dict, times) -> None:
-    """Write timeseries.csv, summary.json, report.md, the figures, fields/*.pvd and femur.png.
+def warp_factor(model, dynamic) -> float:
+    """The displacement scale of the pictures: a round number from the dynamic peak deflection."""
+    return render.nice_warp_factor(dynamic.peak("max_deflection_mm").value, float(model.frame.length_mm))
 
-    ``basis`` (n_dofs, m) spans every written field; ``vm_rows`` is the von Mises channel's
-    projection of it; ``kept`` maps step indices to full displacement fields [mm].
+
+def write_files(folder: Path, case, model, system, basis, vm_rows, kept: dict, static_u, times, dynamic,
+                static) -> list[str]:
+    """Write timeseries.csv, the figures (loads, deflection and von Mises against time),
+    femur.png (the deformed femur at the kept step nearest the dynamic peak deflection) and
+    fields/*.pvd into ``folder``, as the case asks; return the figures' file names.
+
+    ``basis`` (n_dofs, m) spans every kept field; ``vm_rows`` is the von Mises channel's
+    projection of it; ``kept`` maps step indices to full displacement fields [mm]; ``static_u``
+    is the static loading's displacement [mm]; ``dynamic`` and ``static`` the loadings' results.
     """
+    (folder / "timeseries.csv").write_text(timeseries_csv([dynamic, static]))
+    written = figures.write_figures(folder, case.name, [dynamic, static]) if case.output.figures else []
+    base = fields.grid(system.nodes, system.cells, system.region, model.frame.up)
+
+    def with_solution(u):
+        return fields.with_solution(base, u, _von_mises_vertices(system, vm_rows, basis.T @ u), system.cells)
+
+    if case.output.screenshot and kept:
+        peak_step = int(np.searchsorted(times, dynamic.peak("max_deflection_mm").time_s))
+        step = min(kept, key=lambda n: abs(n - peak_step))
+        render.deformed_picture(folder / "femur.png", with_solution(kept[step]), model.site.entry_point,
+                                model.site.direction, warp_factor(model, dynamic),
+                                f"{case.name}: dynamic loading, t = {times[step]:.2f} s")
+        written.append("femur.png")
+    if case.output.fields:
+        steps = sorted(n for n in kept if n % case.output.fields_every == 0 or n == len(times) - 1)
+        fields.write_series(folder / "fields", "dynamic", [(float(times[n]), with_solution(kept[n])) for n in steps])
+        fields.write_series(folder / "fields", "static", [(0.0, with_solution(static_u))])
+    return written
+
+
+def write_summary(folder: Path, result, model, figures: list[str]) -> None:
+    """Write summary.json and report.md into ``folder``; ``figures`` names the figures there
+    (:func:`write_files`)."""
     case, summary = result.case, result.summary
-    log.info("writing results to %s", out_dir)
-    warp = render.nice_warp_factor(result.peak("max_deflection_mm").value, summary["mesh"]["length_mm"])
-    summary["figures"] = {"warp_factor": warp, "files": []}
-
-    def vertex_vm(u):
-        return _von_mises_vertices(system, vm_rows, basis.T @ u)
-
-    with atomic.atomic_folder(out_dir) as tmp:
-        (tmp / "timeseries.csv").write_text(timeseries_csv([result.dynamic, result.static]))
-        if case.output.figures:
-            summary["figures"]["files"] = figures.write_figures(tmp, case.name, [result.dynamic, result.static])
-        base = fields.grid(system.nodes, system.cells, system.region, model.frame.up)
-        if case.output.fields:
-            field_steps = sorted(n for n in kept if n % case.output.fields_every == 0 or n == len(times) - 1)
-            frames = [(float(times[n]), fields.with_solution(base, kept[n], vertex_vm(kept[n]), system.cells))
-                      for n in field_steps]
-            fields.write_series(tmp / "fields", "dynamic", frames)
-            static_grid = fields.with_solution(base, static_u, vertex_vm(static_u), system.cells)
-            fields.write_series(tmp / "fields", "static", [(0.0, static_grid)])
-        if case.output.screenshot and kept:
-            peak_step = int(np.searchsorted(times, result.peak("max_deflection_mm").time_s))
-            step = min(kept, key=lambda n: abs(n - peak_step))
-            g = fields.with_solution(base, kept[step], vertex_vm(kept[step]), system.cells)
-            render.deformed_picture(tmp / "femur.png", g, model.site.entry_point, model.site.direction, warp,
-                                    f"{case.name}: dynamic loading, t = {times[step]:.2f} s")
-            summary["figures"]["files"].append("femur.png")
-        summary["figures"]["fields"] = ["fields/dynamic.pvd", "fields/static.pvd"] if case.output.fields else []
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, default=default))
-        (tmp / "report.md").write_text(report.run_report(summary))
+    log.info("writing results to %s", result.out_dir)
+    summary["figures"] = {"warp_factor": warp_factor(model, result.dynamic), "files": figures,
+                          "fields": ["fields/dynamic.pvd", "fields/static.pvd"] if case.output.fields else []}
+    (folder / "summary.json").write_text(json.dumps(summary, indent=2, default=default))
+    (folder / "report.md").write_text(report.run_report(summary))

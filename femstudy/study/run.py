@@ -4,10 +4,14 @@ modal and resolved analyses → hole models → :class:`StudyResult` and its res
 The clamped stiffness K_ff is factorised once. The static solve, the transient's reduced
 basis (load-dependent Ritz vectors, femstudy.fe.transient), the modal analysis (shift-invert
 about 0) and the resolved transient all use that factorisation; a second one (K̂) is made
-only when a reduced march fails its check against the full equations. It is released before
-the local models of the drilled hole are factorised, so the two never share memory. Every loading's
+only when a reduced march fails its check against the full equations. Every loading's
 response is then read from one projection of the basis onto the output points
 (femstudy.fe.outputs).
+
+The hole models need only the static shapes K⁻¹P, and the results files only the thesis-step
+march, so on a Linux machine with two or more cores each runs in a forked process as soon as
+what it needs is solved, beside the march and the modal and resolved analyses
+(:mod:`femstudy.lanes`); the numbers are those of a run in one process (``parallel=False``).
 
 The results folder is built under a temporary name and renamed into place at the end
 (:func:`femstudy.atomic.atomic_folder`), so an interrupted run never leaves a folder that
@@ -16,6 +20,7 @@ looks complete.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import platform
 import time
@@ -26,14 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from femstudy import __version__, fe
+from femstudy import __version__, atomic, fe
 from femstudy.casefile import Case
 from femstudy.femur_model import REGION_NAMES
 from femstudy.hole import verdicts
+from femstudy.lanes import Lanes
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.fe.linsolve import available_memory_bytes
 from femstudy.meshing.model import surface_file
-from femstudy.study import feasibility
+from femstudy.study import feasibility, output
 from femstudy.study.femur import femur_model, femur_spec
 from femstudy.study.loading import CaseLoading, case_loading, resolved_loading
 from femstudy.study.results import LoadingResult, comparison
@@ -65,7 +71,8 @@ class Dynamics:
     """How the transients ran and what inertia does.
 
     scheme, vectors, indicator : the thesis-step march (femstudy.fe.transient)
-    lowest_period_s, step_check : from the modal analysis
+    lowest_period_s, step_check : from the modal analysis; modes_kept: its modes were read back
+                 from an earlier analysis of the same model (femstudy.fe.modal)
     resolved_* : the resolved run (step, steps, vectors, indicator, peak deflection and its
                  quasi-static counterpart [mm]); amplification = resolved / quasi-static peak
     """
@@ -85,6 +92,7 @@ class Dynamics:
     resolved_drill_point_mm: float | None = None
     quasi_static_drill_point_mm: float | None = None
     flute_passing_Hz: float | None = None
+    modes_kept: bool = False
 
     @property
     def amplification(self) -> float | None:
@@ -170,7 +178,7 @@ def study_channels(system, patch, model, exclusion_radius_mm: float, clamp_lengt
 
 def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | None = None,
               cache_dir: Path = DEFAULT_CACHE_DIR, solver: str = "auto", bones_dir: Path | None = None,
-              force: bool = False, keep_solutions: bool = True) -> StudyResult:
+              force: bool = False, keep_solutions: bool = True, parallel: bool = True) -> StudyResult:
     """Run the drilling study of ``case``; write its results folder when ``out_dir`` is given.
 
     Parameters
@@ -194,6 +202,10 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         Serve the solves from the solutions an earlier run kept for the same stiffness matrices
         and keep this run's (:mod:`femstudy.fe.kept`): a repeated study, or one that changes only
         the load histories, then factorises nothing. False factorises every time.
+    parallel : bool
+        Run the hole models, and the writing of the figures and fields, in forked processes
+        beside the global analyses on a Linux machine with two or more cores
+        (:mod:`femstudy.lanes`); False runs everything in this process, with the same numbers.
 
     Returns
     -------
@@ -229,19 +241,88 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     solutions = cache_dir / "solutions" if keep_solutions else None
     fs = fe.factorize(system, fe.clamp(system, model.clamps), solver, keep=solutions)
     clock["factor"] = time.perf_counter()
-
+    shapes = fs.factor.solve(patch.patterns[fs.bc.free])  # K⁻¹P: the static response to a unit thrust and torque
+    unit_fields = fs.bc.expand(shapes)
     damping = (case.analysis.rayleigh_alpha_per_s, case.analysis.rayleigh_beta_s)
+
+    with contextlib.ExitStack() as stack:
+        folder = None if out_dir is None else stack.enter_context(atomic.atomic_folder(Path(out_dir)))
+        lanes = stack.enter_context(Lanes(parallel))  # left first: no child outlives the folder it writes to
+        hole_lane = lanes.start("hole models", lambda: _hole(case, model, system, unit_fields, loading, solver,
+                                                              solutions))
+        step = _thesis_step(case, fs, patch, channels, loading, shapes, damping)
+        clock["dynamic"] = time.perf_counter()
+        files_lane = None if folder is None else lanes.start("figures and fields", lambda: output.write_files(
+            folder, case, model, system, step.basis, step.von_mises_rows, step.fields, step.static_u, times,
+            step.dynamic, step.static))
+        dynamics = Dynamics(step.scheme, step.vectors, step.indicator)
+        if case.analysis.modes:
+            log.info("modal analysis: lowest %d modes", case.analysis.modes)
+            modes = fe.solve_modal(fs, k=case.analysis.modes)
+            check = fe.step_check(float(modes.period_s[0]), case.time.step_s)
+            dynamics = Dynamics(step.scheme, step.vectors, step.indicator, tuple(float(f) for f in modes.frequency_Hz),
+                                check, modes_kept=modes.kept)
+            clock["modal"] = time.perf_counter()
+            if case.analysis.resolved:
+                dynamics = _resolved(case, loading, fs, patch, shapes, channels, damping, dynamics)
+        fs.factor.close()  # the global solves are done: the factorisation's memory is free
+        clock["resolved"] = time.perf_counter()
+        hole = hole_lane.result()
+        figures = [] if files_lane is None else files_lane.result()
+        clock["lanes"] = time.perf_counter()
+
+        summary = _summary(case, model, loading, system, fs, step.dynamic, step.static, dynamics, clock)
+        if hole is not None:  # the hole's measures replace the patch's mesh-dependent peak for margins
+            summary["solver"]["hole_factorisations"] = sum(s.factorisations for s in hole.stations)
+            summary["hole"] = hole.to_json()
+            summary["hole"]["convergence"] = verdicts.applicable(record, verdicts.conditions(case))
+            summary["margins"] = summary["hole"]["margins"] = verdicts.gate(hole.margins(),
+                                                                            summary["hole"]["convergence"])
+        summary["timings"].update(hole_s=hole_lane.seconds, files_s=files_lane and files_lane.seconds,
+                                  waited_for_lanes_s=clock["lanes"] - clock["resolved"], parallel=lanes.forking)
+        summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the summary
+        result = StudyResult(case, step.dynamic, step.static, dynamics, loading, summary, out_dir, hole)
+        if folder is not None:
+            output.write_summary(folder, result, model, figures)
+    return result
+
+
+@dataclass(frozen=True, eq=False)
+class ThesisStep:
+    """The dynamic and static loadings on the case's time grid, and what their files need.
+
+    scheme, vectors, indicator : how the dynamic loading was marched (femstudy.fe.transient)
+    basis : (n_dofs, m) spans every field written; von_mises_rows its von Mises projection
+    fields : step index → displacement [mm] of the steps whose field is written or pictured
+    static_u : the static loading's displacement [mm]
+    """
+
+    scheme: str
+    vectors: int
+    indicator: float
+    dynamic: LoadingResult
+    static: LoadingResult
+    basis: np.ndarray
+    von_mises_rows: np.ndarray
+    fields: dict
+    static_u: np.ndarray
+
+
+def _thesis_step(case, fs, patch, channels, loading, shapes, damping) -> ThesisStep:
+    """March the dynamic loading (or take it quasi-static) and solve the static one, on the
+    case's time grid; ``shapes`` = K⁻¹P of the patch (free DOFs)."""
+    times, dyn = loading.times_s, loading.dynamic
     amplitudes = np.column_stack([dyn.thrust_N, dyn.torque_Nmm])
     keep = _kept_steps(case, len(times), int(np.argmax(dyn.thrust_N)))
     recorder = fe.StepRecorder(channels, len(times), keep)
     if case.analysis.transient:
         log.info("dynamic loading: cutting + chip evacuation, Newmark average acceleration")
-        march = fe.solve_transient(fs, patch.patterns, amplitudes, times, damping=damping, observer=recorder)
+        march = fe.solve_transient(fs, patch.patterns, amplitudes, times, damping=damping, observer=recorder,
+                                   static_shapes=shapes)
         scheme, vectors, indicator = march.scheme, march.n_vectors, march.indicator
-        shapes = march.static_shapes
     else:
         log.info("dynamic loading: cutting + chip evacuation, quasi-static (no inertia)")
-        march, shapes = None, fs.factor.solve(patch.patterns[fs.bc.free])
+        march = None
         scheme, vectors, indicator = "quasi-static", shapes.shape[1], 0.0
     basis = march.full_basis() if march is not None and march.scheme == "reduced" else \
         fs.bc.expand(np.linalg.qr(shapes)[0])
@@ -261,42 +342,17 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         dynamic_history = fe.reduced_history(channels, basis, coords, projections)
         fields = {n: basis @ coords[:, n] for n in keep}
     dynamic = LoadingResult.from_history("dynamic", times, dyn.thrust_N, dyn.torque_Nmm, dynamic_history)
-    clock["dynamic"] = time.perf_counter()
+    return ThesisStep(scheme, vectors, indicator, dynamic, static, basis, projections["von_mises"], fields, static_u)
 
-    dynamics = Dynamics(scheme, vectors, indicator)
-    if case.analysis.modes:
-        log.info("modal analysis: lowest %d modes", case.analysis.modes)
-        modes = fe.solve_modal(fs, k=case.analysis.modes)
-        check = fe.step_check(float(modes.period_s[0]), case.time.step_s)
-        dynamics = Dynamics(scheme, vectors, indicator, tuple(float(f) for f in modes.frequency_Hz), check)
-        clock["modal"] = time.perf_counter()
-        if case.analysis.resolved:
-            dynamics = _resolved(case, loading, fs, patch, shapes, channels, damping, dynamics)
-    fs.factor.close()  # the global solves are done: the factorisation's memory is free for the local models'
-    clock["resolved"] = time.perf_counter()
 
-    hole = None
-    if case.loads.application == "hole":  # the global field per unit patch load drives the hole models
-        from femstudy.hole.study import hole_stresses
+def _hole(case, model, system, unit_fields, loading, solver, solutions):
+    """The hole models' stresses (:func:`femstudy.hole.study.hole_stresses`), or None when the
+    case loads a surface patch."""
+    if case.loads.application != "hole":
+        return None
+    from femstudy.hole.study import hole_stresses
 
-        hole = hole_stresses(case, model, system, fs.bc.expand(shapes), loading, case.loads.hole_options(), solver,
-                             solutions)
-    clock["hole"] = time.perf_counter()
-
-    summary = _summary(case, model, loading, system, fs, dynamic, static, dynamics, clock)
-    if hole is not None:  # the hole's measures replace the patch's mesh-dependent peak for margins
-        summary["solver"]["hole_factorisations"] = sum(s.factorisations for s in hole.stations)
-        summary["hole"] = hole.to_json()
-        summary["hole"]["convergence"] = verdicts.applicable(record, verdicts.conditions(case))
-        summary["margins"] = summary["hole"]["margins"] = verdicts.gate(hole.margins(), summary["hole"]["convergence"])
-    summary["timings"]["hole_s"] = clock["hole"] - clock["resolved"]
-    summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the results
-    result = StudyResult(case, dynamic, static, dynamics, loading, summary, out_dir, hole)
-    if out_dir is not None:
-        from femstudy.study.output import write_results
-
-        write_results(Path(out_dir), result, model, system, basis, projections["von_mises"], static_u, fields, times)
-    return result
+    return hole_stresses(case, model, system, unit_fields, loading, case.loads.hole_options(), solver, solutions)
 
 
 def _constant(static: LoadingResult, times, loading: CaseLoading) -> LoadingResult:

@@ -117,8 +117,9 @@ def study_point(case, folder: Path, context: Context) -> dict:
     """The full study of one case into ``folder``; the headline numbers."""
     from femstudy.study.run import run_study
 
+    # a sweep runs its points side by side (processes, Dask workers): a point forks no lanes of its own
     result = run_study(case, folder, cache_dir=Path(context.cache_dir), solver=context.solver,
-                       bones_dir=context.bones_dir and Path(context.bones_dir))
+                       bones_dir=context.bones_dir and Path(context.bones_dir), parallel=False)
     summary = result.to_json()
     res = summary["results"]
     out = {"results_folder": str(folder), "dofs": summary["solver"]["dofs"],
