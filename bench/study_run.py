@@ -2,8 +2,9 @@
 
     python bench/study_run.py [--tree DIR] [--label LABEL] [--repeats 2] [--out FILE.md]
 
-Each measurement is a separate process timed from outside (wall time, peak resident memory;
-bench/peers/measure.py), in this order:
+Each measurement is a separate process timed from outside (wall time, peak resident memory
+of its largest process, and the peak of all its processes' summed PSS, for a study whose lanes
+fork; bench/peers/measure.py), in this order:
 
   bare static     bench/peers/femstudy_run.py --analysis static on the case's cached mesh
   cached run      femstudy run cases/middiaphysis.toml (the mesh and, since the cold run, the
@@ -94,11 +95,12 @@ def main() -> None:
                     break
             wall = statistics.median(m.wall_s for m in runs)
             peak = statistics.median(m.peak_MB for m in runs)
+            tree = statistics.median(m.tree_peak_MB for m in runs)
             last = (runs[-1].log.read_text(errors="replace").strip().splitlines() or [""])[-1]
             if runs[-1].returncode != expect:
                 last = f"exit {runs[-1].returncode} (expected {expect}): {last}"
-            rows.append((label, wall, peak, last if expect or runs[-1].returncode != expect else ""))
-            print(f"{label}: {wall:.1f} s, {peak:.0f} MB", flush=True)
+            rows.append((label, wall, peak, tree, last if expect or runs[-1].returncode != expect else ""))
+            print(f"{label}: {wall:.1f} s, {peak:.0f} MB (all processes {tree:.0f} MB)", flush=True)
             return wall, peak
 
         run = ["run", CASE, "--out", str(work / "out"), "--quiet"]
@@ -113,7 +115,7 @@ def main() -> None:
         resolved = variant(tree, work, "resolved", lambda s: re.sub(r"step_s\s*=.*", "step_s = 0.0001", s))
         label = "resolved 16 mm (cached mesh): run, step 1e-4 s"
         if args.no_resolved:
-            rows.append((label, float("nan"), float("nan"), "not run"))
+            rows.append((label, float("nan"), float("nan"), float("nan"), "not run"))
         else:
             timed(label, femstudy_command(tree, "run", str(resolved), "--mesh-size", "16", "--out", str(work / "r16"),
                                           "--quiet"), repeats=1)
@@ -126,8 +128,10 @@ def main() -> None:
 
     lines = [f"Study runs, femstudy from {args.label} ({time.strftime('%Y-%m-%d %H:%M')}, load average "
              f"{os.getloadavg()[0]:.2f} at the end; medians of {args.repeats} where repeated)", "",
-             "| measurement | wall [s] | peak RSS [MB] | message |", "|---|---:|---:|---|"]
-    lines += [f"| {label} | {wall:.1f} | {peak:.0f} | {message[:160]} |" for label, wall, peak, message in rows]
+             "| measurement | wall [s] | peak RSS, largest process [MB] | peak PSS, all processes [MB] | message |",
+             "|---|---:|---:|---:|---|"]
+    lines += [f"| {label} | {wall:.1f} | {peak:.0f} | {tree:.0f} | {message[:160]} |"
+              for label, wall, peak, tree, message in rows]
     lines += ["", f"cached run / bare static (8 mm): {cached[0] / static8[0]:.2f} (wall), "
                   f"{cached[1] / static8[1]:.2f} (memory); bare static 16 mm peak {static16[1]:.0f} MB"]
     if factorising is not None:
