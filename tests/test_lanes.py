@@ -73,3 +73,11 @@ def test_leaving_the_block_ends_a_child_still_running():
             lane = lanes.start("long", lambda: time.sleep(60))
             raise KeyError("the caller failed")
     assert not lane._process.is_alive() and lane._process.exitcode is not None
+
+
+def test_the_run_command_can_keep_the_study_in_one_process():
+    from femstudy.cli import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["run", "case.toml"]).parallel is True
+    assert parser.parse_args(["run", "case.toml", "--serial"]).parallel is False
