@@ -9,6 +9,7 @@ fork; bench/peers/measure.py), in this order:
   bare static     bench/peers/femstudy_run.py --analysis static on the case's cached mesh
   cached run      femstudy run cases/middiaphysis.toml (the mesh and, since the cold run, the
                   kept solutions of its stiffness matrices cached: no factorisation)
+  one process     the same with --serial (no lanes forked: femstudy.lanes)
   factorising     the same with --no-kept-solutions (the mesh cached, every matrix factorised)
   cold run        the same with an empty mesh cache (TetWild included)
   resolved 16 mm  the bare static solve at 16 mm (which caches that mesh), then the case at
@@ -107,6 +108,8 @@ def main() -> None:
         timed("cold run (empty mesh cache)", femstudy_command(tree, *run), repeats=1)
         static8 = timed("bare static solve, 8 mm", bare_static(8.0, work, cache), cwd=REPO)
         cached = timed("cached run", femstudy_command(tree, *run))
+        if "--serial" in (tree / "femstudy/commands/run.py").read_text():  # a tree whose study forks lanes
+            timed("cached run, one process (--serial)", femstudy_command(tree, *run, "--serial"))
         factorising = None
         if "no-kept-solutions" in (tree / "femstudy/commands/run.py").read_text():  # a tree with kept solutions
             factorising = timed("cached mesh, factorising (--no-kept-solutions)",

@@ -1,7 +1,8 @@
-"""The files of a study's results folder: figures and picture, tables, fields and the report.
+"""The files of a study's results folder: time series, figures, picture, fields, summary and report.
 
 They are written into the folder being built (:func:`femstudy.atomic.atomic_folder`, opened by
-:func:`femstudy.study.run.run_study`), the pictures possibly by another process (:mod:`femstudy.lanes`)."""
+:func:`femstudy.study.run.run_study`): :func:`write_files` possibly by a forked process
+(:mod:`femstudy.lanes`), :func:`write_summary` last, by the study's own."""
 
 from __future__ import annotations
 
