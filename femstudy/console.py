@@ -11,9 +11,11 @@ are plain lines. Other INFO records are lines ``[  12.3 s] message``; warnings a
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import threading
 import time
+import weakref
 
 
 class ConsoleHandler(logging.Handler):
@@ -25,6 +27,8 @@ class ConsoleHandler(logging.Handler):
         self._stream = stream
         self.start = time.perf_counter()
         self.bars: dict = {}
+        handler = weakref.ref(self)
+        os.register_at_fork(after_in_child=lambda: (h := handler()) is not None and h._forget_bars())
 
     @property
     def stream(self):
@@ -68,6 +72,13 @@ class ConsoleHandler(logging.Handler):
         bar = self.bars[task][0]
         bar.n = done
         bar.set_postfix_str(message, refresh=True)
+
+    def _forget_bars(self) -> None:
+        """In a forked child (femstudy.lanes): the bars on the terminal are the parent's; drop
+        them without drawing, so the child's lines neither close nor redraw them."""
+        for bar, _ in self.bars.values():
+            bar.disable = True
+        self.bars = {}
 
     def _close_bars(self) -> None:
         for task in list(self.bars):

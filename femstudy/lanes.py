@@ -5,18 +5,21 @@ the modal and resolved analyses, the figures and field files), so on a machine w
 more cores the study runs such parts side by side. Inside a :class:`Lanes` block,
 :meth:`Lanes.start` forks a child that runs a function and sends its result back pickled;
 every process of the block (the caller and its children) uses half of the cores' BLAS/MKL
-threads, at least one (threadpoolctl). Without ``fork`` on Linux (Windows, macOS), with one
-core, or with ``parallel=False``, a function runs in the caller when its result is asked
-for: the results are the same either way.
+threads, at least one (threadpoolctl). A function runs in the caller instead, when its result
+is asked for, wherever forking is not safe (:func:`can_fork`) or with ``parallel=False``; its
+result is then the same to round-off (the thread counts, and so the order of BLAS sums, differ).
 
 An exception raised in a child is raised again in the caller, with the child's traceback as
 its cause; a :class:`~femstudy.errors.UserError` keeps its one-line message. Leaving the block
-ends every child still running, and a child ends when its parent does (killed, say), so no
-lane outlives the run that started it.
+ends every child still running (SIGTERM, on which a child unwinds, so its atomic writes clean
+up), and a child ends when its parent does (killed, say): no lane outlives its run. Ctrl-C
+stops the caller, whose block then ends the children. A child's log records go to the
+handlers it inherited (the console), not to ones attached to the caller later.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import multiprocessing
 import os
@@ -33,8 +36,17 @@ def cores() -> int:
 
 
 def can_fork() -> bool:
-    """Whether lanes fork here: Linux (fork is safe with the BLAS/MKL runtimes used) and ≥ 2 cores."""
-    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods() and cores() >= 2
+    """Whether lanes fork here: on Linux with ≥ 2 cores, not from a daemonic process (a
+    process-pool worker may not have children), and not while a pyvista plotter is open in
+    this process (a notebook's plot: a child must not inherit its render window's GL context)."""
+    return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
+            and cores() >= 2 and not multiprocessing.current_process().daemon and not _plotters_open())
+
+
+def _plotters_open() -> bool:
+    """Whether pyvista holds open plotters here (its registry of the plotters not yet closed)."""
+    plotter = sys.modules.get("pyvista.plotting.plotter")
+    return bool(plotter is not None and getattr(plotter, "_ALL_PLOTTERS", None))
 
 
 class ChildTraceback(Exception):
@@ -46,19 +58,27 @@ class Lane:
 
     seconds : the function's wall time [s] once the result is in (NaN before)
     forked : whether a child computes it
+    exitcode : the child's exit status once it ended (negative: the signal that ended it)
     """
 
     def __init__(self, name: str, fn: Callable, threads: int | None):
         self.name, self._fn, self._value, self._done = name, fn, None, False
         self.seconds = float("nan")
+        self.exitcode = None
         self._process = self._receive = None
         if threads is not None:
             context = multiprocessing.get_context("fork")
-            self._receive, send = context.Pipe(duplex=False)
-            self._process = context.Process(target=_child, args=(fn, send, threads, os.getpid()), name=f"femstudy {name}",
-                                            daemon=True)
-            self._process.start()
-            send.close()  # the child holds the only sending end: its exit ends the pipe
+            receive, send = context.Pipe(duplex=False)
+            process = context.Process(target=_child, args=(fn, send, threads, os.getpid()),
+                                      name=f"femstudy {name}", daemon=True)
+            try:
+                process.start()
+            except OSError:  # no memory or process left to fork: the caller runs it
+                receive.close()
+                return
+            finally:
+                send.close()  # the child holds the only sending end: its exit ends the pipe
+            self._process, self._receive = process, receive
 
     @property
     def forked(self) -> bool:
@@ -79,21 +99,26 @@ class Lane:
         try:
             status, value, seconds, text = self._receive.recv()
         except EOFError:
-            self._process.join()
-            raise RuntimeError(f"the {self.name} process ended without a result "
-                               f"(exit code {self._process.exitcode})") from None
-        finally:
-            self._receive.close()
-        self._process.join()
+            self.close()
+            raise RuntimeError(f"the {self.name} process ended without a result (exit code {self.exitcode})") from None
+        self.close()
         if status == "error":
             raise value from ChildTraceback(text)
         return value, seconds
 
     def close(self) -> None:
-        """End the child if it still runs (the caller failed or gave up on the result)."""
-        if self._process is not None and self._process.is_alive():
-            self._process.terminate()
+        """End the child if it still runs, wait for it and release its pipe and handles."""
+        if self._process is None or self.exitcode is not None:
+            return
+        try:
+            if self._process.is_alive():
+                self._process.terminate()
             self._process.join()
+            self.exitcode = self._process.exitcode
+        finally:
+            self._receive.close()
+            with contextlib.suppress(ValueError):  # still running after a second interrupt
+                self._process.close()
 
 
 class Lanes:
@@ -128,22 +153,28 @@ class Lanes:
         return lane
 
     def __exit__(self, *exc) -> None:
-        for lane in self._lanes:
-            lane.close()
-        if self._limits is not None:
-            self._limits.restore_original_limits()
+        with contextlib.ExitStack() as stack:  # every lane closed and the limits restored, whatever fails
+            if self._limits is not None:
+                stack.callback(self._limits.restore_original_limits)
+            for lane in self._lanes:
+                stack.callback(lane.close)
 
 
 def _child(fn: Callable, send, threads: int, parent: int) -> None:
-    """A child's whole life: limit its threads, run ``fn``, send (status, value, seconds, traceback)."""
+    """A child's whole life: signals set up, threads limited, ``fn`` run, (status, value,
+    seconds, traceback) sent."""
     from threadpoolctl import threadpool_limits
 
     start = time.perf_counter()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the caller's to handle; it ends the lanes
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))  # unwind: atomic writes clean up
     _end_with_parent(parent)
     try:
         threadpool_limits(limits=threads)
         message = ("ok", fn(), time.perf_counter() - start, "")
-    except BaseException as exc:  # everything goes back to the caller, which decides
+    except SystemExit:  # terminated: the caller no longer waits for a result
+        raise
+    except BaseException as exc:  # everything else goes back to the caller, which decides
         message = ("error", exc, time.perf_counter() - start, traceback.format_exc())
     try:
         send.send(message)

@@ -2,6 +2,7 @@
 comes back to the caller; without forking it runs in the caller with the same result."""
 
 import os
+import sys
 import time
 
 import numpy as np
@@ -9,9 +10,14 @@ import pytest
 from threadpoolctl import threadpool_info
 
 from femstudy.errors import UserError
-from femstudy.lanes import Lanes, can_fork
+from femstudy.lanes import Lanes, can_fork, cores
 
-forking = pytest.mark.skipif(not can_fork(), reason="lanes fork only on Linux with two or more cores")
+def forks_here() -> bool:
+    """What lanes do here apart from open plotters: fork on Linux with two or more cores."""
+    return sys.platform.startswith("linux") and cores() >= 2
+
+
+forking = pytest.mark.skipif(not forks_here(), reason="lanes fork only on Linux with two or more cores")
 
 
 def blas_threads() -> list[int]:
@@ -31,17 +37,23 @@ def test_a_lane_returns_what_the_function_returns(parallel):
 
 
 @forking
-def test_lanes_run_at_once_and_share_the_threads():
+def test_lanes_run_at_once_and_share_the_threads(tmp_path):
+    def meet(mine: str, other: str) -> bool:  # each waits for the other: only side by side do both arrive
+        (tmp_path / mine).touch()
+        deadline = time.monotonic() + 20
+        while not (tmp_path / other).exists():
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return True
+
     before = blas_threads()
     with Lanes() as lanes:
+        assert lanes.forking
         inside = blas_threads()
-        start = time.perf_counter()
-        sleepers = [lanes.start(f"sleep {k}", lambda: time.sleep(0.5)) for k in range(2)]
-        for lane in sleepers:
-            lane.result()
-        elapsed = time.perf_counter() - start
-    assert elapsed < 0.9  # side by side, not one after the other
-    assert max(inside) <= max(1, os.cpu_count() // 2)
+        pair = [lanes.start("a", lambda: meet("a", "b")), lanes.start("b", lambda: meet("b", "a"))]
+        assert [lane.result() for lane in pair] == [True, True]
+    assert max(inside) <= max(1, cores() // 2)
     assert blas_threads() == before  # restored on leaving the block
 
 
@@ -61,18 +73,29 @@ def test_an_error_in_a_lane_is_raised_in_the_caller(parallel):
 @forking
 def test_a_lane_whose_process_dies_is_reported_not_waited_for():
     with Lanes() as lanes:
+        assert lanes.forking  # else the function would end this process
         lane = lanes.start("doomed", lambda: os._exit(3))
         with pytest.raises(RuntimeError, match="doomed process ended without a result .exit code 3"):
             lane.result()
 
 
 @forking
-def test_leaving_the_block_ends_a_child_still_running():
+def test_leaving_the_block_ends_a_child_still_running_and_its_atomic_writes_clean_up(tmp_path):
+    from femstudy.atomic import atomic_path
+
+    def writes_slowly():
+        with atomic_path(tmp_path / "result.npz") as part, open(part, "wb") as out:
+            out.write(b"half a result")
+            time.sleep(60)
+
+    start = time.perf_counter()
     with pytest.raises(KeyError):
         with Lanes() as lanes:
-            lane = lanes.start("long", lambda: time.sleep(60))
+            lane = lanes.start("long", writes_slowly)
+            time.sleep(0.5)
             raise KeyError("the caller failed")
-    assert not lane._process.is_alive() and lane._process.exitcode is not None
+    assert time.perf_counter() - start < 5 and lane.exitcode == 143  # 128 + SIGTERM, not the sleep's end
+    assert list(tmp_path.iterdir()) == []  # neither the result nor its part file
 
 
 def test_the_run_command_can_keep_the_study_in_one_process():
@@ -81,3 +104,42 @@ def test_the_run_command_can_keep_the_study_in_one_process():
     parser = build_parser()
     assert parser.parse_args(["run", "case.toml"]).parallel is True
     assert parser.parse_args(["run", "case.toml", "--serial"]).parallel is False
+
+
+def _lane_in_a_pool_worker(_):
+    with Lanes() as lanes:
+        lane = lanes.start("inner", lambda: 6 * 7)
+        return lane.forked, lane.result()
+
+
+@forking
+def test_a_process_pool_worker_runs_its_lanes_itself():
+    """A daemonic process may not have children: its lanes run in it."""
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.map(_lane_in_a_pool_worker, [0]) == [(False, 42)]
+
+
+def test_an_open_plotter_keeps_lanes_in_the_caller():
+    import pyvista as pv
+
+    plotter = pv.Plotter(off_screen=True)
+    try:
+        assert not can_fork()
+    finally:
+        plotter.close()
+    assert can_fork() == forks_here()
+
+
+@forking
+def test_a_fork_that_fails_leaves_the_work_to_the_caller(monkeypatch):
+    import multiprocessing.process
+
+    def no_fork(self):
+        raise OSError(12, "Cannot allocate memory")
+
+    monkeypatch.setattr(multiprocessing.process.BaseProcess, "start", no_fork)
+    with Lanes() as lanes:
+        lane = lanes.start("unforkable", lambda: os.getpid())
+        assert not lane.forked and lane.result() == os.getpid()

@@ -267,6 +267,32 @@ def test_picture_without_fields_and_report_lists_what_exists(tmp_path, mesh_cach
     assert "femur.png" in text and "Fields for ParaView" not in text
 
 
+def test_a_study_in_one_process_writes_what_a_study_in_lanes_writes(tmp_path, mesh_cache):
+    """parallel=False (--serial) and the default lanes: the same files and the same numbers
+    (to round-off); without a results folder nothing is written and no files lane starts."""
+    from femstudy.lanes import can_fork
+
+    forks = can_fork()  # before the serial run renders its picture here (then lanes no longer fork)
+    lanes, out_lanes = run(tmp_path, mesh_cache, order=1, step=1.0, name="lanes")
+    serial, out_serial = run(tmp_path, mesh_cache, order=1, step=1.0, name="serial", parallel=False)
+    assert (lanes["timings"]["parallel"], serial["timings"]["parallel"]) == (forks, False)
+
+    def files(folder):
+        return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+    assert files(out_lanes) == files(out_serial) and "femur.png" in files(out_lanes)
+    assert lanes["figures"] == serial["figures"]
+    for quantity, row in serial["results"].items():
+        for loading in ("dynamic", "static"):
+            assert lanes["results"][quantity][loading]["value"] == pytest.approx(row[loading]["value"], rel=1e-12)
+    case = parse_case(CASE.format(order=1, scale=1.0, step=1.0, screenshot="true", fields="true", resolved="false",
+                                  application="surface_patch"))
+    before = set(tmp_path.iterdir())
+    result = run_study(case, None, cache_dir=mesh_cache)
+    assert result.out_dir is None and result.summary["timings"]["files_s"] is None
+    assert set(tmp_path.iterdir()) == before
+
+
 def test_the_reduced_march_gives_the_maxima_of_plain_stepping(tmp_path, mesh_cache):
     """The default case's loading on a coarse femur: the study's one-factorisation march
     (Ritz vectors of K_ff) and plain stepping with K-hat factorised (how the transient was

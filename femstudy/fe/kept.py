@@ -15,8 +15,9 @@ the bound free of any amplification by nearly dependent right-hand sides.
 The set is stored under the SHA-256 of K's pattern and values (:func:`fingerprint`), so only
 an identical matrix finds it; on loading, a random combination of the kept pairs is checked
 against K (one product) before any of them is used. Every solve of a repeated study — its
-static shapes, Krylov blocks and modal blocks, and the hole models' — is a combination of the
-first run's right-hand sides to round-off, and is served without a factorisation.
+static shapes, Krylov blocks and the hole models' — is a combination of the first run's
+right-hand sides to round-off, and is served without a factorisation (its modal analysis
+solves nothing: the modes are kept too, femstudy.fe.modal).
 """
 
 from __future__ import annotations

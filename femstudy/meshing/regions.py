@@ -83,21 +83,23 @@ class RegionFields:
 
 def _inside_mask(surf: Surface, origin, dims, h) -> np.ndarray:
     """Voxel centres inside the closed surface (VTK scan conversion), as a bool [i, j, k] array."""
-    import vtk
     from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkCommonCore import VTK_UNSIGNED_CHAR
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkImagingStencil import vtkImageStencil, vtkPolyDataToImageStencil
 
-    stencil = vtk.vtkPolyDataToImageStencil()
+    stencil = vtkPolyDataToImageStencil()
     stencil.SetInputData(surf.polydata())
     stencil.SetOutputOrigin(*origin)
     stencil.SetOutputSpacing(h, h, h)
     stencil.SetOutputWholeExtent(0, dims[0] - 1, 0, dims[1] - 1, 0, dims[2] - 1)
-    blank = vtk.vtkImageData()
+    blank = vtkImageData()
     blank.SetDimensions(*dims)
     blank.SetSpacing(h, h, h)
     blank.SetOrigin(*origin)
-    blank.AllocateScalars(vtk.VTK_UNSIGNED_CHAR, 1)
+    blank.AllocateScalars(VTK_UNSIGNED_CHAR, 1)
     vtk_to_numpy(blank.GetPointData().GetScalars())[:] = 0
-    fill = vtk.vtkImageStencil()
+    fill = vtkImageStencil()
     fill.SetInputData(blank)
     fill.SetStencilConnection(stencil.GetOutputPort())
     fill.ReverseStencilOn()

@@ -7,7 +7,6 @@ They are written into the folder being built (:func:`femstudy.atomic.atomic_fold
 from __future__ import annotations
 
 import json
-import logging
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,6 @@ from femstudy.jsonable import default
 from femstudy.study import fields, figures, render, report
 from femstudy.study.results import timeseries_csv
 
-log = logging.getLogger(__name__)
 
 
 def _von_mises_vertices(system, vm_rows: np.ndarray, coordinates: np.ndarray) -> np.ndarray:
@@ -43,9 +41,11 @@ def write_files(folder: Path, case, model, system, basis, vm_rows, kept: dict, s
     """
     (folder / "timeseries.csv").write_text(timeseries_csv([dynamic, static]))
     written = figures.write_figures(folder, case.name, [dynamic, static]) if case.output.figures else []
-    base = fields.grid(system.nodes, system.cells, system.region, model.frame.up)
+    base = None
 
     def with_solution(u):
+        nonlocal base
+        base = fields.grid(system.nodes, system.cells, system.region, model.frame.up) if base is None else base
         return fields.with_solution(base, u, _von_mises_vertices(system, vm_rows, basis.T @ u), system.cells)
 
     if case.output.screenshot and kept:
@@ -62,12 +62,11 @@ def write_files(folder: Path, case, model, system, basis, vm_rows, kept: dict, s
     return written
 
 
-def write_summary(folder: Path, result, model, figures: list[str]) -> None:
-    """Write summary.json and report.md into ``folder``; ``figures`` names the figures there
-    (:func:`write_files`)."""
+def write_summary(folder: Path, result, model, figure_files: list[str]) -> None:
+    """Write summary.json and report.md into ``folder``; ``figure_files`` names the figures
+    there (:func:`write_files`)."""
     case, summary = result.case, result.summary
-    log.info("writing results to %s", result.out_dir)
-    summary["figures"] = {"warp_factor": warp_factor(model, result.dynamic), "files": figures,
+    summary["figures"] = {"warp_factor": warp_factor(model, result.dynamic), "files": figure_files,
                           "fields": ["fields/dynamic.pvd", "fields/static.pvd"] if case.output.fields else []}
     (folder / "summary.json").write_text(json.dumps(summary, indent=2, default=default))
     (folder / "report.md").write_text(report.run_report(summary))

@@ -11,7 +11,8 @@ response is then read from one projection of the basis onto the output points
 The hole models need only the static shapes K⁻¹P, and the results files only the thesis-step
 march, so on a Linux machine with two or more cores each runs in a forked process as soon as
 what it needs is solved, beside the march and the modal and resolved analyses
-(:mod:`femstudy.lanes`); the numbers are those of a run in one process (``parallel=False``).
+(:mod:`femstudy.lanes`); the numbers are those of a run in one process (``parallel=False``) to
+round-off.
 
 The results folder is built under a temporary name and renamed into place at the end
 (:func:`femstudy.atomic.atomic_folder`), so an interrupted run never leaves a folder that
@@ -26,6 +27,7 @@ import platform
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
+from functools import partial
 from importlib import metadata
 from pathlib import Path
 
@@ -35,6 +37,7 @@ from femstudy import __version__, atomic, fe
 from femstudy.casefile import Case
 from femstudy.femur_model import REGION_NAMES
 from femstudy.hole import verdicts
+from femstudy.hole.study import hole_stresses
 from femstudy.lanes import Lanes
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.fe.linsolve import available_memory_bytes
@@ -205,7 +208,8 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     parallel : bool
         Run the hole models, and the writing of the figures and fields, in forked processes
         beside the global analyses on a Linux machine with two or more cores
-        (:mod:`femstudy.lanes`); False runs everything in this process, with the same numbers.
+        (:mod:`femstudy.lanes`); False runs everything in this process, with the same numbers
+        to round-off.
 
     Returns
     -------
@@ -242,19 +246,24 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     fs = fe.factorize(system, fe.clamp(system, model.clamps), solver, keep=solutions)
     clock["factor"] = time.perf_counter()
     shapes = fs.factor.solve(patch.patterns[fs.bc.free])  # K⁻¹P: the static response to a unit thrust and torque
-    unit_fields = fs.bc.expand(shapes)
     damping = (case.analysis.rayleigh_alpha_per_s, case.analysis.rayleigh_beta_s)
 
     with contextlib.ExitStack() as stack:
         folder = None if out_dir is None else stack.enter_context(atomic.atomic_folder(Path(out_dir)))
         lanes = stack.enter_context(Lanes(parallel))  # left first: no child outlives the folder it writes to
-        hole_lane = lanes.start("hole models", lambda: _hole(case, model, system, unit_fields, loading, solver,
-                                                              solutions))
+        hole_lane = None
+        if case.loads.application == "hole":  # the global field per unit patch load drives the hole models
+            hole_lane = lanes.start("hole models", partial(
+                hole_stresses, case, model, system, fs.bc.expand(shapes), loading, case.loads.hole_options(), solver,
+                solutions))
         step = _thesis_step(case, fs, patch, channels, loading, shapes, damping)
         clock["dynamic"] = time.perf_counter()
-        files_lane = None if folder is None else lanes.start("figures and fields", lambda: output.write_files(
-            folder, case, model, system, step.basis, step.von_mises_rows, step.fields, step.static_u, times,
-            step.dynamic, step.static))
+        files_lane = None
+        if folder is not None:
+            log.info("writing results to %s", out_dir)
+            files_lane = lanes.start("figures and fields", partial(
+                output.write_files, folder, case, model, system, step.basis, step.von_mises_rows, step.fields,
+                step.static_u, times, step.dynamic, step.static))
         dynamics = Dynamics(step.scheme, step.vectors, step.indicator)
         if case.analysis.modes:
             log.info("modal analysis: lowest %d modes", case.analysis.modes)
@@ -265,9 +274,9 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
             clock["modal"] = time.perf_counter()
             if case.analysis.resolved:
                 dynamics = _resolved(case, loading, fs, patch, shapes, channels, damping, dynamics)
-        fs.factor.close()  # the global solves are done: the factorisation's memory is free
+        fs.factor.close()  # the global solves are done (the lanes forked with it hold its pages until they end)
         clock["resolved"] = time.perf_counter()
-        hole = hole_lane.result()
+        hole = None if hole_lane is None else hole_lane.result()
         figures = [] if files_lane is None else files_lane.result()
         clock["lanes"] = time.perf_counter()
 
@@ -278,7 +287,7 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
             summary["hole"]["convergence"] = verdicts.applicable(record, verdicts.conditions(case))
             summary["margins"] = summary["hole"]["margins"] = verdicts.gate(hole.margins(),
                                                                             summary["hole"]["convergence"])
-        summary["timings"].update(hole_s=hole_lane.seconds, files_s=files_lane and files_lane.seconds,
+        summary["timings"].update(hole_s=hole_lane and hole_lane.seconds, files_s=files_lane and files_lane.seconds,
                                   waited_for_lanes_s=clock["lanes"] - clock["resolved"], parallel=lanes.forking)
         summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the summary
         result = StudyResult(case, step.dynamic, step.static, dynamics, loading, summary, out_dir, hole)
@@ -343,16 +352,6 @@ def _thesis_step(case, fs, patch, channels, loading, shapes, damping) -> ThesisS
         fields = {n: basis @ coords[:, n] for n in keep}
     dynamic = LoadingResult.from_history("dynamic", times, dyn.thrust_N, dyn.torque_Nmm, dynamic_history)
     return ThesisStep(scheme, vectors, indicator, dynamic, static, basis, projections["von_mises"], fields, static_u)
-
-
-def _hole(case, model, system, unit_fields, loading, solver, solutions):
-    """The hole models' stresses (:func:`femstudy.hole.study.hole_stresses`), or None when the
-    case loads a surface patch."""
-    if case.loads.application != "hole":
-        return None
-    from femstudy.hole.study import hole_stresses
-
-    return hole_stresses(case, model, system, unit_fields, loading, case.loads.hole_options(), solver, solutions)
 
 
 def _constant(static: LoadingResult, times, loading: CaseLoading) -> LoadingResult:
