@@ -143,3 +143,22 @@ def test_a_fork_that_fails_leaves_the_work_to_the_caller(monkeypatch):
     with Lanes() as lanes:
         lane = lanes.start("unforkable", lambda: os.getpid())
         assert not lane.forked and lane.result() == os.getpid()
+
+
+@forking
+def test_a_child_leaves_the_consoles_progress_bars_to_its_parent():
+    import io
+    import threading
+
+    from tqdm import tqdm
+
+    from femstudy.console import ConsoleHandler
+
+    stream = io.StringIO()
+    handler = ConsoleHandler(stream=stream)
+    handler.bars["transient steps"] = (tqdm(total=10, file=stream), threading.Event())
+    with Lanes() as lanes:
+        in_child = lanes.start("child", lambda: (dict(handler.bars), stream.getvalue()))
+        bars, _ = in_child.result()
+    assert bars == {} and "transient steps" in handler.bars  # dropped there, kept here
+    handler._close_bars()
