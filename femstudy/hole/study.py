@@ -280,15 +280,7 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         t, F_cut, T_cut, F_evac, T_evac = station_amplitudes(cond, float(tip), scale)
         cut = cut_boundary(system, unit_fields, local, station)
         patterns = hole_loads(local, station, growth_exponent=cond.growth_exponent)
-        # the unit responses: the cut faces under the global field of a unit patch thrust and
-        # torque, and each unit hole load with the cut faces held; any loading combines them,
-        # so kept solutions serve a study that changes only the loads
-        n_cut, n_hole = cut.values.shape[1], patterns.patterns.shape[1]
-        prescribed = factorize_prescribed(local, cut.dofs, solver, keep)
-        unit = prescribed.solve(np.hstack([cut.values, np.zeros((len(cut.dofs), n_hole))]),
-                                np.hstack([np.zeros((local.n_dofs, n_cut)), patterns.patterns]))
-        prescribed.fs.factor.close()
-        factorisations = prescribed.fs.factor.factorisations
+        unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
         loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order
                              [*static, *static, 0.0, 0.0]]).T  # (patch thrust, torque, 4 hole loads) × 2 loadings
         u = unit @ loadings
@@ -300,6 +292,19 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
                                cut.moved_mm, factorisations))
         log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
     return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds, axis_bottom)
+
+
+def _unit_responses(local, cut, patterns, solver, keep) -> tuple[np.ndarray, int]:
+    """The local model's unit responses [mm] and the factorisations they took: the cut faces
+    under the global field of a unit patch thrust and torque, and each unit hole load with the
+    cut faces held. Any loading combines them, so kept solutions serve a study that changes only
+    the loads; the factorisation is released on return, before the measures are taken."""
+    n_cut, n_hole = cut.values.shape[1], patterns.patterns.shape[1]
+    prescribed = factorize_prescribed(local, cut.dofs, solver, keep)
+    unit = prescribed.solve(np.hstack([cut.values, np.zeros((len(cut.dofs), n_hole))]),
+                            np.hstack([np.zeros((local.n_dofs, n_cut)), patterns.patterns]))
+    prescribed.fs.factor.close()
+    return unit, prescribed.fs.factor.factorisations
 
 
 #: Azimuths and radial step [mm] of the probe for the largest local model that stays on the bone.
