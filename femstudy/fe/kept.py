@@ -62,6 +62,31 @@ def fingerprint(A: sp.csr_matrix) -> str:
     return digest.hexdigest()[:32]
 
 
+def read_store(path: Path, names, what: str) -> dict | None:
+    """The arrays ``names`` of the store at ``path``; None when there is none or it cannot be
+    read (logged: a damaged store costs a recomputation, never the run)."""
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as stored:
+            return {name: stored[name] for name in names}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        log.warning("ignoring unreadable kept %s %s (%s)", what, path, exc)
+        return None
+
+
+def write_store(path: Path, what: str, **arrays) -> bool:
+    """Store ``arrays`` at ``path`` atomically; False (logged) when the folder cannot take it:
+    a read-only or full cache costs the next run a recomputation, not this run."""
+    try:
+        with atomic_path(path) as tmp, open(tmp, "wb") as out:
+            np.savez(out, **arrays)
+        return True
+    except OSError as exc:
+        log.warning("could not keep the %s in %s (%s)", what, path.parent, exc)
+        return False
+
+
 class KeptSolutions(Factor):
     """K⁻¹ from kept solutions of the same K, factorising only for right-hand sides they miss.
 
@@ -94,14 +119,10 @@ class KeptSolutions(Factor):
         return self._made
 
     def _read(self) -> None:
-        if not self.path.is_file():
+        stored = read_store(self.path, ("U", "Z", "e", "method"), "solutions")
+        if stored is None:
             return
-        try:
-            with np.load(self.path) as stored:
-                U, Z, e, method = stored["U"], stored["Z"], stored["e"], str(stored["method"])
-        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-            log.warning("ignoring unreadable kept solutions %s (%s)", self.path, exc)
-            return
+        U, Z, e, method = stored["U"], stored["Z"], stored["e"], str(stored["method"])
         if U.shape != Z.shape or U.shape[0] != self.n or len(e) != U.shape[1] or U.shape[1] > MAX_KEPT:
             log.warning("ignoring kept solutions %s: they do not fit a %d-unknown matrix", self.path, self.n)
             return
@@ -171,13 +192,9 @@ class KeptSolutions(Factor):
         if self.U.shape[1] > self.loaded and size > MAX_STORED_BYTES:
             log.info("the solutions of this %s-unknown matrix are not kept: %.1f GB is more than %.1f GB",
                      f"{self.n:,}", size / 1e9, MAX_STORED_BYTES / 1e9)
-        elif self.U.shape[1] > self.loaded:
-            try:
-                with atomic_path(self.path) as tmp, open(tmp, "wb") as out:
-                    np.savez(out, U=self.U, Z=self.Z, e=self.e, method=self.method)
-                self.loaded = self.U.shape[1]
-            except OSError as exc:  # a read-only or full cache costs the next run a factorisation, not this run
-                log.warning("could not keep the solutions in %s (%s)", self.path.parent, exc)
+        elif self.U.shape[1] > self.loaded and write_store(self.path, "solutions", U=self.U, Z=self.Z, e=self.e,
+                                                           method=self.method):
+            self.loaded = self.U.shape[1]
         if self._factor is not None:
             self._factor.close()
             self._factor = None

@@ -19,16 +19,14 @@ computes and stores them.
 from __future__ import annotations
 
 import logging
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import scipy.linalg
 
-from femstudy.atomic import atomic_path
 from femstudy.errors import require
-from femstudy.fe.kept import KeptSolutions, fingerprint
+from femstudy.fe.kept import KeptSolutions, fingerprint, read_store, write_store
 from femstudy.fe.static import FactorizedSystem
 from femstudy.fe.subspace import grow_projection, orthonormal_complement, symmetric
 
@@ -85,7 +83,7 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks
     else:
         omega2, phi = _block_krylov(fs, k, rtol, max_blocks)
         if store is not None:
-            _keep(store, omega2, phi)
+            write_store(store, "modes", omega2=omega2, phi=phi)
     frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi)
     log.info("natural frequencies: %s Hz%s", ", ".join(f"{f:.1f}" for f in frequencies),
              " (kept from an earlier analysis of this model)" if kept is not None else "")
@@ -119,7 +117,7 @@ def _block_krylov(fs: FactorizedSystem, k: int, rtol: float, max_blocks: int) ->
         previous = omega2
         if settled:
             phi = V @ Phi
-            residual = _residuals(fs, phi, omega2)
+            residual = _residuals(fs.K @ phi, fs.mass(phi), omega2)
             if residual.max() <= rtol:
                 break
         if V.shape[1] + block > n:
@@ -127,16 +125,15 @@ def _block_krylov(fs: FactorizedSystem, k: int, rtol: float, max_blocks: int) ->
         X = fs.factor.solve(MQ)
     if residual is None:
         phi = V @ Phi
-        residual = _residuals(fs, phi, omega2)
+        residual = _residuals(fs.K @ phi, fs.mass(phi), omega2)
     require(residual.max() <= max(rtol, LARGEST_RESIDUAL), f"the lowest {k} modes did not converge (relative residual "
                                                f"{residual.max():.1e} after {V.shape[1]} vectors)")
     return omega2, phi
 
 
-def _residuals(fs: FactorizedSystem, phi: np.ndarray, omega2: np.ndarray) -> np.ndarray:
-    """‖Kφ − ω²Mφ‖ / ‖Kφ‖ of each Ritz pair."""
-    stiffness = fs.K @ phi
-    return np.linalg.norm(stiffness - fs.mass(phi) * omega2, axis=0) / np.linalg.norm(stiffness, axis=0)
+def _residuals(stiffness: np.ndarray, mass: np.ndarray, omega2: np.ndarray) -> np.ndarray:
+    """‖Kφ − ω²Mφ‖ / ‖Kφ‖ of each pair, from the products Kφ and Mφ."""
+    return np.linalg.norm(stiffness - mass * omega2, axis=0) / np.linalg.norm(stiffness, axis=0)
 
 
 def _kept_path(fs: FactorizedSystem, k: int) -> Path | None:
@@ -150,19 +147,15 @@ def _read_kept(fs: FactorizedSystem, path: Path, k: int, rtol: float) -> tuple[n
     """Kept (ω², φ) that fit fs and pass the checks a converged analysis passes, else None:
     residuals within ``rtol``, each ω² its shape's Rayleigh quotient to :data:`KEPT_RAYLEIGH`
     (as a Ritz value is), ascending, and ΦᵀMΦ = I to :data:`KEPT_ORTHONORMALITY`."""
-    if not path.is_file():
+    stored = read_store(path, ("omega2", "phi"), "modes")
+    if stored is None:
         return None
-    try:
-        with np.load(path) as stored:
-            omega2, phi = stored["omega2"], stored["phi"]
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-        log.warning("ignoring unreadable kept modes %s (%s)", path, exc)
-        return None
+    omega2, phi = stored["omega2"], stored["phi"]
     if omega2.shape != (k,) or phi.shape != (fs.n_free, k):
         log.warning("ignoring kept modes %s: they do not fit this model", path)
         return None
     stiffness, mass = fs.K @ phi, fs.mass(phi)
-    residual = np.linalg.norm(stiffness - mass * omega2, axis=0) / np.linalg.norm(stiffness, axis=0)
+    residual = _residuals(stiffness, mass, omega2)
     rayleigh = np.einsum("ik,ik->k", phi, stiffness) / np.einsum("ik,ik->k", phi, mass)
     if (residual.max() > rtol or np.abs(rayleigh - omega2).max() > KEPT_RAYLEIGH * omega2.max()
             or np.abs(phi.T @ mass - np.eye(k)).max() > KEPT_ORTHONORMALITY or np.any(np.diff(omega2) < 0)):
@@ -171,9 +164,3 @@ def _read_kept(fs: FactorizedSystem, path: Path, k: int, rtol: float) -> tuple[n
     return omega2, phi
 
 
-def _keep(path: Path, omega2: np.ndarray, phi: np.ndarray) -> None:
-    try:
-        with atomic_path(path) as tmp, open(tmp, "wb") as out:
-            np.savez(out, omega2=omega2, phi=phi)
-    except OSError as exc:  # a read-only or full cache costs the next analysis its iterations, not this run
-        log.warning("could not keep the modes in %s (%s)", path.parent, exc)

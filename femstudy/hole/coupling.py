@@ -21,7 +21,7 @@ import numpy as np
 
 from femstudy.errors import require
 from femstudy.hole.dirichlet import facet_indices, facet_nodes, node_dofs
-from femstudy.hole.probe import point_probe
+from femstudy.hole.probe import MeshLocator, point_probe
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +40,8 @@ class CutBoundary:
     moved_mm: float
 
 
-def cut_boundary(global_system, fields: np.ndarray, local_system, station, tolerance_mm: float = 2.0) -> CutBoundary:
+def cut_boundary(global_system, fields: np.ndarray, local_system, station, tolerance_mm: float = 2.0,
+                 locator: MeshLocator | None = None) -> CutBoundary:
     """Global displacement fields at the cut-face nodes of a station's local model.
 
     Parameters
@@ -50,6 +51,8 @@ def cut_boundary(global_system, fields: np.ndarray, local_system, station, toler
     local_system : :class:`femstudy.fe.FESystem` assembled on ``station.mesh``
     station : :class:`femstudy.hole.mesh.HoleStation`
     tolerance_mm : how far outside the global mesh a cut node may lie
+    locator : :class:`~femstudy.hole.probe.MeshLocator` of ``global_system``, to reuse one built
+        for several stations
 
     Returns
     -------
@@ -60,19 +63,16 @@ def cut_boundary(global_system, fields: np.ndarray, local_system, station, toler
     >>> cut = cut_boundary(system, unit_fields, local, station)        # doctest: +SKIP
     >>> u = factorize_prescribed(local, cut.dofs).solve(cut.values)  # doctest: +SKIP
     """
-    import pyvista as pv
-
     fields = np.asarray(fields, float).reshape(global_system.n_dofs, -1)
     nodes = facet_nodes(local_system, facet_indices(local_system, station.cut_faces))
     points = local_system.nodes[nodes].copy()
-    probe = point_probe(global_system, points)
+    locator = locator or MeshLocator(global_system)
+    probe = point_probe(global_system, points, locator=locator)
     moved = 0.0
     outside = probe.outside
     element = probe.element.copy()
     if len(outside):
-        mesh = global_system.mesh
-        grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.t.T}, mesh.p.T)
-        cell, nearest = grid.find_closest_cell(points[outside], return_closest_point=True)
+        cell, nearest = locator.closest(points[outside])
         distance = np.linalg.norm(nearest - points[outside], axis=1)
         moved = float(distance.max())
         require(moved <= tolerance_mm, f"the local model's cut boundary reaches {moved:.2f} mm outside the femur "

@@ -134,6 +134,11 @@ class MeshLocator:
     def _coordinates(self, element: np.ndarray, points: np.ndarray):
         return _reference_coordinates(self.system, element, points, self._inverse)
 
+    def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) the cell nearest each point (n, 3) [mm] and (n, 3) the nearest point on it."""
+        cell, nearest = self._grid.find_closest_cell(np.atleast_2d(points), return_closest_point=True)
+        return np.asarray(cell, dtype=np.int64).reshape(-1), np.asarray(nearest, float).reshape(-1, 3)
+
     def label(self, points: np.ndarray) -> np.ndarray:
         """(n,) region code of the element holding each point (n, 3) [mm], −1 outside the mesh:
         :meth:`locate` without its closest-cell search, quicker for the many points of a

@@ -31,6 +31,7 @@ from femstudy.hole.frame import HoleFrame
 from femstudy.hole.loads import hole_loads
 from femstudy.hole.measures import HoleMeasure, distance_measures, exclusion_measures
 from femstudy.hole.mesh import Resolution, hole_mesh
+from femstudy.hole.probe import MeshLocator
 
 log = logging.getLogger(__name__)
 
@@ -273,12 +274,13 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
     clamp = case.clamps.length_mm
     static = (float(loading.static_thrust_N), float(loading.static_torque_Nmm))
     runs, measures = [], []
+    global_locator = MeshLocator(system)  # every station's cut nodes are found in the one femur mesh
     for k, tip in enumerate(tips):
         start = time.perf_counter()
         station = hole.at_station(k)
         local = assemble(station.mesh, materials, order=case.mesh.order, long_axis=up)
         t, F_cut, T_cut, F_evac, T_evac = station_amplitudes(cond, float(tip), scale)
-        cut = cut_boundary(system, unit_fields, local, station)
+        cut = cut_boundary(system, unit_fields, local, station, locator=global_locator)
         patterns = hole_loads(local, station, growth_exponent=cond.growth_exponent)
         unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
         loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order

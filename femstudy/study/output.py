@@ -41,14 +41,14 @@ def write_files(folder: Path, case, model, system, basis, vm_rows, kept: dict, s
     """
     (folder / "timeseries.csv").write_text(timeseries_csv([dynamic, static]))
     written = figures.write_figures(folder, case.name, [dynamic, static]) if case.output.figures else []
-    base = None
+    picture = case.output.screenshot and kept
+    base = fields.grid(system.nodes, system.cells, system.region, model.frame.up) if picture or case.output.fields \
+        else None
 
     def with_solution(u):
-        nonlocal base
-        base = fields.grid(system.nodes, system.cells, system.region, model.frame.up) if base is None else base
         return fields.with_solution(base, u, _von_mises_vertices(system, vm_rows, basis.T @ u), system.cells)
 
-    if case.output.screenshot and kept:
+    if picture:
         peak_step = int(np.searchsorted(times, dynamic.peak("max_deflection_mm").time_s))
         step = min(kept, key=lambda n: abs(n - peak_step))
         render.deformed_picture(folder / "femur.png", with_solution(kept[step]), model.site.entry_point,
