@@ -5,7 +5,7 @@ is solved once for a unit patch thrust and torque; :func:`femstudy.hole.study.ho
 then runs the coupled hole models (global displacements on the cut faces, drill loads on the
 hole) at the case's stations for each hole refinement of ``--levels``, and the largest dynamic
 von Mises stress over the stations at each distance from the hole wall and beyond each
-exclusion radius is assessed by femstudy.sweeps.convergence (formal order 2 for P2 stresses,
+exclusion radius is assessed by femstudy.convergence (formal order 2 for P2 stresses,
 mesh measure the hole model's wall element size 0.3 mm / refinement), against the placement
 noise: the case's own level once more with the local mesh turned about the drill axis by half a
 hole-circle step (the analogue of remeshing one size with TetWild: same resolution, other
@@ -16,7 +16,7 @@ element positions). One heavy job: the finest default level has ~0.2M DOFs per s
 
 ``--json`` writes the verdicts for the case's own level (``loads.refinement``, one of the
 levels) as a record a case names in
-``loads.convergence`` (femstudy/hole/verdicts.py), so that its failure margins use only
+``loads.convergence`` (femstudy/study/verdicts.py), so that its failure margins use only
 converged measures.
 """
 
@@ -34,13 +34,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from femstudy import fe  # noqa: E402
 from femstudy.atomic import write_text  # noqa: E402
 from femstudy.casefile import load_case  # noqa: E402
-from femstudy.hole import verdicts  # noqa: E402
+from femstudy.study import verdicts  # noqa: E402
 from femstudy.hole.mesh import Resolution  # noqa: E402
 from femstudy.hole.study import hole_stresses  # noqa: E402
 from femstudy.jsonable import jsonable  # noqa: E402
 from femstudy.study.femur import femur_model  # noqa: E402
 from femstudy.study.loading import case_loading  # noqa: E402
-from femstudy.sweeps.convergence import assess  # noqa: E402
+from femstudy.convergence import assess  # noqa: E402
 
 
 def main() -> None:

@@ -140,7 +140,7 @@ def worker(mesh_path: Path, method: str, steps: int, modes: int) -> dict:
     from femstudy.drilling.history import DrillingConditions, evaluate
     from femstudy.fe import (assemble, clamp, drill_patch, factorize, solve_modal, solve_static, solve_transient,
                              step_check)
-    from femstudy.femur_model import Clamps, DrillSite, TetMesh
+    from femstudy.femur_mesh import Clamps, DrillSite, TetMesh
 
     memory = PeakMemory()
     data = np.load(mesh_path)

@@ -198,7 +198,7 @@ class LoadsSpec(_Section):
     ``smoothing_mm`` the Gaussian smoothing of the bone surfaces it sees (0: none).
     ``convergence``: a hole-convergence record (``bench/hole_convergence.py --json``, path
     relative to the case file) whose verdicts decide which measures a failure margin may use
-    (:mod:`femstudy.hole.verdicts`)."""
+    (:mod:`femstudy.study.verdicts`)."""
 
     application: Literal["hole", "surface_patch"] = "hole"
     stations: int = Field(3, ge=1, le=20)

@@ -47,7 +47,7 @@ def inner_cortex(xy: np.ndarray) -> np.ndarray:
 def layered_plate(follow: bool = True, refinement: float = 1.0):
     """An 8 mm plate around a hole drilled along +z to tips 2, 4, 6 mm: cortex above
     :func:`inner_cortex`, cancellous bone below; ``follow``: the mesh's layers follow it."""
-    from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL
+    from femstudy.femur_mesh import CANCELLOUS_DISTAL, CORTICAL
 
     frame = HoleFrame.along([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])
 

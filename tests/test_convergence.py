@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from femstudy.sweeps.convergence import GCI_CONVERGED, assess, coarsest_meeting_target, observed_order
+from femstudy.convergence import GCI_CONVERGED, assess, coarsest_meeting_target, observed_order
 
 
 def exact_series(h, phi0=1.0, c=0.3, p=2.0):

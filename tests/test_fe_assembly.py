@@ -14,7 +14,7 @@ from femstudy.errors import UserError
 from femstudy.fe import assemble, factorize, fix_facets, solve_static
 from femstudy.fe.linsolve import rigid_body_modes
 from femstudy.fe.materials import CORTICAL_TRANSVERSELY_ISOTROPIC, TransverselyIsotropic, isotropic_stiffness
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
 from femstudy.materials import BoneMaterials
 
 

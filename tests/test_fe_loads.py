@@ -7,7 +7,7 @@ from fe_cases import LENGTH, R_OUT, end_facets, tube
 from femstudy.errors import UserError
 from femstudy.fe import assemble, clamp, drill_patch
 from femstudy.fe.geometry import tube_mesh
-from femstudy.femur_model import Clamps, DrillSite, TetMesh
+from femstudy.femur_mesh import Clamps, DrillSite, TetMesh
 
 RADIUS = 1.35  # the thesis's 2.7 mm drill
 

@@ -9,7 +9,7 @@ import skfem
 from femstudy.materials import BoneMaterials
 from femstudy.fe import assemble, element_stress
 from femstudy.fe.materials import CORTICAL_TRANSVERSELY_ISOTROPIC, frame_with_axis, rotate_stiffness
-from femstudy.femur_model import TetMesh
+from femstudy.femur_mesh import TetMesh
 
 STRAIN = np.array([1e-3, -4e-4, 2.5e-4, 3e-4, -6e-4, 8e-4])  # Voigt, engineering shear
 VOIGT_TO_TENSOR = [[0, 5, 4], [5, 1, 3], [4, 3, 2]]

@@ -7,7 +7,7 @@ from fe_cases import LENGTH, R_OUT, clamped_both_ends, tube
 from femstudy.fe import (StepRecorder, deflection_channel, drill_patch, element_stress, factorize, point_channel,
                          reduced_history, solve_static, von_mises, von_mises_channel, von_mises_nodal)
 from femstudy.fe.post import VON_MISES_ROWS, quadrature_points
-from femstudy.femur_model import DrillSite
+from femstudy.femur_mesh import DrillSite
 
 
 def test_von_mises_of_simple_states():

@@ -9,7 +9,7 @@ import pytest
 from hole_cases import CONE, DIAMETER, POINT_ANGLE, RADIUS
 from femstudy.errors import UserError
 from femstudy.fe.geometry import tube_mesh
-from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL, TetMesh
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CORTICAL, TetMesh
 from femstudy.hole import HoleFrame, hole_mesh
 from femstudy.hole.femur import femur_columns
 from femstudy.meshing.landmarks import boundary_faces

@@ -240,7 +240,7 @@ def test_a_material_interface_is_followed_by_element_faces_beside_the_hole():
     corners (0.65 and 2.65 mm, tips 2, 4, 6 mm): on and outside the hole circle every column
     has a vertex on it, so the faces between cortical and cancellous cells lie on it there;
     the stations' holes are the same as without it, to round-off."""
-    from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL
+    from femstudy.femur_mesh import CANCELLOUS_DISTAL, CORTICAL
 
     plain, hole = layered_plate(follow=False), layered_plate()
     assert signed_volumes(hole.mesh.points, hole.mesh.tets).min() > 0

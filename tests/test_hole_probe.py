@@ -147,7 +147,7 @@ def test_boundary_points_straddle_a_material_interface():
     within the bisection's 2⁻¹² of a spacing (plus the chords' sag, < 5 µm) of the interface,
     where the von Mises stress jumps: without them the samples miss it by up to a spacing."""
     from hole_cases import assemble_model, inner_cortex, layered_plate
-    from femstudy.femur_model import CANCELLOUS_DISTAL, CORTICAL
+    from femstudy.femur_mesh import CANCELLOUS_DISTAL, CORTICAL
     from femstudy.hole.probe import MeshLocator
 
     station = layered_plate().at_station(1)

@@ -14,7 +14,7 @@ import pytest
 
 from conftest import TLEM2_FEMUR, assert_clean_failure, run_cli
 from femstudy.casefile import parse_case
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
 from femstudy.meshing import cache, landmarks, model as model_module, tetra
 from femstudy.study.femur import femur_model, femur_spec
 
@@ -370,7 +370,7 @@ def test_a_wider_drill_is_refined_and_loaded_at_its_own_radius(builtin, forbid_t
 def test_faces_of_two_tets_sharing_one(offset):
     """Two tets glued on face (1, 2, 3): six boundary faces pointing outwards, one interface
     face between their regions; the same with vertex numbers past the face keys' range."""
-    from femstudy.femur_model import TetMesh
+    from femstudy.femur_mesh import TetMesh
 
     points = np.zeros((offset + 5, 3))
     points[offset:] = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]]

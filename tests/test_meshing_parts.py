@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 from conftest import REPO, TLEM2_FEMUR, assert_clean_failure, run_cli
 from femstudy.casefile import CanalSpec, CortexSpec, GeometrySpec
 from femstudy.errors import UserError
-from femstudy.femur_model import TetMesh
+from femstudy.femur_mesh import TetMesh
 from femstudy.meshing import refine, regions, tetra
 from femstudy.meshing.builtin_femur import BUILTIN_STL
 from femstudy.meshing.frame import build_frame

@@ -120,7 +120,7 @@ def test_hole_stresses_replace_the_patch_peak(p2_run):
 
 
 def test_a_convergence_record_decides_which_margin_governs(p2_run):
-    from femstudy.hole import verdicts
+    from femstudy.study import verdicts
     from femstudy.study.hole_report import hole_section
 
     summary, _ = p2_run

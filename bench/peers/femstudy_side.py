@@ -25,7 +25,7 @@ import numpy as np
 from bench.peers.case import PeerCase
 from femstudy.atomic import atomic_path
 from femstudy.casefile import MaterialsSpec
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, Clamps, DrillSite, TetMesh
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, Clamps, DrillSite, TetMesh
 
 FE_MODULES = {"femstudy": "femstudy.fe", "standin": "bench.peers.standin"}
 PATCH_RADIUS_MM = 1.35

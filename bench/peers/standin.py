@@ -25,7 +25,7 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from femstudy.materials import BoneMaterials
 from femstudy.export.p2 import p2_layout
-from femstudy.femur_model import (CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, Clamps, DrillSite,
+from femstudy.femur_mesh import (CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, Clamps, DrillSite,
                                   TetMesh)
 
 

@@ -42,7 +42,7 @@ import numpy as np
 
 from femstudy.atomic import atomic_path
 from femstudy.errors import UserError
-from femstudy.femur_model import REGION_NAMES
+from femstudy.femur_mesh import REGION_NAMES
 
 #: C3D10 node k (0-based) is scikit-fem P2 element node C3D10_FROM_SKFEM[k].
 C3D10_FROM_SKFEM = np.arange(10)

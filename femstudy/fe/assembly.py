@@ -25,7 +25,7 @@ from skfem.quadrature import get_quadrature
 
 from femstudy.errors import require
 from femstudy.fe.materials import ElementMaterials, element_materials
-from femstudy.femur_model import TetMesh
+from femstudy.femur_mesh import TetMesh
 from femstudy.materials import BoneMaterials
 
 log = logging.getLogger(__name__)
@@ -183,7 +183,7 @@ def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int =
     Parameters
     ----------
     mesh : TetMesh
-        Points [mm], tetrahedra and region codes (:mod:`femstudy.femur_model`).
+        Points [mm], tetrahedra and region codes (:mod:`femstudy.femur_mesh`).
     materials : BoneMaterials, optional
         Cortical and cancellous materials; default thesis Table 3-1.
     order : {2, 1}

@@ -65,7 +65,7 @@ def _require_every_part_clamped(system, clamped_vertices: np.ndarray) -> None:
 
 
 def clamp(system, clamps) -> Constraints:
-    """Constraints from :class:`femstudy.femur_model.Clamps` masks over the input mesh points."""
+    """Constraints from :class:`femstudy.femur_mesh.Clamps` masks over the input mesh points."""
     mask = np.zeros(system.mesh.nvertices, dtype=bool)
     for part in (clamps.proximal, clamps.distal):
         part = np.asarray(part, dtype=bool)

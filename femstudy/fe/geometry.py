@@ -12,7 +12,7 @@ from itertools import permutations
 
 import numpy as np
 
-from femstudy.femur_model import CORTICAL, TetMesh
+from femstudy.femur_mesh import CORTICAL, TetMesh
 
 
 def _kuhn() -> np.ndarray:

@@ -85,7 +85,7 @@ def outward_facet_normals(mesh, facets: np.ndarray) -> np.ndarray:
     return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def _facet_nodes(system, facets: np.ndarray) -> np.ndarray:
+def facet_node_indices(system, facets: np.ndarray) -> np.ndarray:
     """(n, 3 or 6) node indices of the facets: vertices, then for P2 the mid-nodes of edges
     (v1, v2), (v0, v2), (v0, v1) — opposite vertex 0, 1, 2."""
     mesh = system.mesh
@@ -101,8 +101,8 @@ def _facet_nodes(system, facets: np.ndarray) -> np.ndarray:
     return np.column_stack([v] + [mesh.nvertices + m for m in mids])
 
 
-def _trace_shape_functions(order: int, lam: np.ndarray) -> np.ndarray:
-    """Facet shape functions at barycentric points lam (..., 3), node order of _facet_nodes."""
+def trace_shape_functions(order: int, lam: np.ndarray) -> np.ndarray:
+    """Facet shape functions at barycentric points lam (..., 3), node order of facet_node_indices."""
     if order == 1:
         return lam
     l0, l1, l2 = lam[..., 0], lam[..., 1], lam[..., 2]
@@ -112,7 +112,7 @@ def _trace_shape_functions(order: int, lam: np.ndarray) -> np.ndarray:
 
 def drill_patch(system, site, radius_mm: float) -> DrillPatch:
     """Unit thrust and torque load patterns over the drill footprint at ``site``
-    (:class:`femstudy.femur_model.DrillSite`) for a drill of radius ``radius_mm``."""
+    (:class:`femstudy.femur_mesh.DrillSite`) for a drill of radius ``radius_mm``."""
     require(radius_mm > 0, f"drill radius must be positive, got {radius_mm} mm")
     mesh = system.mesh
     d = np.asarray(site.direction, float)
@@ -150,8 +150,8 @@ def drill_patch(system, site, radius_mm: float) -> DrillPatch:
         raise missed
     used = w.any(axis=1)
     facets, x, w = candidates[used], x[used], w[used]
-    nodes = _facet_nodes(system, facets)
-    N = _trace_shape_functions(system.order, lam)
+    nodes = facet_node_indices(system, facets)
+    N = trace_shape_functions(system.order, lam)
 
     A = w.sum()
     c = np.einsum("fq,fqj->j", w, x) / A

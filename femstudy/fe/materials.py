@@ -2,7 +2,7 @@
 
 Stress and strain vectors are ordered ``[xx, yy, zz, yz, xz, xy]``; strains use engineering
 shear (γ = 2ε), so σ = D ε with D the 6×6 stiffness [MPa]. Region codes follow
-:mod:`femstudy.femur_model`: the cortical material applies to CORTICAL, the cancellous one
+:mod:`femstudy.femur_mesh`: the cortical material applies to CORTICAL, the cancellous one
 to both cancellous regions.
 
 The optional transversely isotropic cortex (``BoneMaterials.cortical_model =
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from femstudy.errors import require
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
 from femstudy.materials import BoneMaterials
 
 

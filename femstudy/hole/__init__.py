@@ -14,7 +14,6 @@ hole (docs/hole.md). Modules:
 * :mod:`.dirichlet` solves with prescribed displacements (the submodel's cut boundary);
 * :mod:`.probe`     displacement and stress at arbitrary points;
 * :mod:`.samples`   points at given distances from the hole surface;
-* :mod:`.verdicts`  convergence verdicts of the measures, and the margins they admit.
 
 Typical use::
 

@@ -16,7 +16,7 @@ import scipy.sparse as sp
 
 from femstudy.errors import require
 from femstudy.fe.constraints import Constraints
-from femstudy.fe.loads import _facet_nodes
+from femstudy.fe.loads import facet_node_indices
 from femstudy.fe.static import FactorizedSystem, factorize
 
 
@@ -54,7 +54,7 @@ def facet_indices(system, faces: np.ndarray) -> np.ndarray:
 
 def facet_nodes(system, facets: np.ndarray) -> np.ndarray:
     """Sorted node indices (vertices and, for P2, edge mid-nodes) on the given facets."""
-    return np.unique(_facet_nodes(system, np.asarray(facets)))
+    return np.unique(facet_node_indices(system, np.asarray(facets)))
 
 
 def node_dofs(nodes: np.ndarray, components=(0, 1, 2)) -> np.ndarray:

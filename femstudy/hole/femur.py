@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from femstudy.errors import UserError, require
-from femstudy.femur_model import CORTICAL, TetMesh
+from femstudy.femur_mesh import CORTICAL, TetMesh
 from femstudy.hole.frame import HoleFrame
 from femstudy.meshing.landmarks import boundary_faces, region_interface
 

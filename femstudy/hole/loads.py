@@ -37,7 +37,7 @@ from skfem.quadrature import get_quadrature
 from skfem.refdom import RefTri
 
 from femstudy.errors import require
-from femstudy.fe.loads import _facet_nodes, _trace_shape_functions, outward_facet_normals
+from femstudy.fe.loads import facet_node_indices, trace_shape_functions, outward_facet_normals
 from femstudy.hole.dirichlet import facet_indices
 
 #: Polynomial degree integrated exactly on each facet.
@@ -72,7 +72,7 @@ class FacetQuadrature:
 
     def shape(self) -> np.ndarray:
         """(q, 3 or 6) trace shape functions at the points."""
-        return _trace_shape_functions(self.order, self.lam)
+        return trace_shape_functions(self.order, self.lam)
 
     def forces(self, traction: np.ndarray) -> np.ndarray:
         """(n_dofs,) nodal forces [N] of a traction (f, q, 3) [MPa] at the points."""
@@ -114,7 +114,7 @@ def facet_quadrature(system, faces: np.ndarray, degree: int = QUADRATURE_DEGREE)
     x = np.einsum("qk,fkj->fqj", lam, corners)
     w = 2.0 * area[:, None] * W[None, :]
     normal = outward_facet_normals(mesh, facets) if len(facets) else np.empty((0, 3))
-    nodes = _facet_nodes(system, facets) if len(facets) else np.empty((0, 3 * system.order), np.int64)
+    nodes = facet_node_indices(system, facets) if len(facets) else np.empty((0, 3 * system.order), np.int64)
     return FacetQuadrature(facets, nodes, lam, x, w, normal, system.order, system.n_dofs)
 
 

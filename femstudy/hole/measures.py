@@ -31,7 +31,7 @@ import numpy as np
 
 from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio
 from femstudy.fe.post import quadrature_points, stress_projection, von_mises
-from femstudy.femur_model import CORTICAL
+from femstudy.femur_mesh import CORTICAL
 from femstudy.hole.samples import hole_distance, offset_samples
 
 #: Measure kinds: at a distance from the hole surface (wall, corner, cone and tip), at a

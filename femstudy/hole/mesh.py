@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from femstudy.errors import require
-from femstudy.femur_model import CORTICAL, TetMesh
+from femstudy.femur_mesh import CORTICAL, TetMesh
 from femstudy.hole.frame import HoleFrame
 from femstudy.hole.prisms import split_prisms
 from femstudy.hole.rings import Disk, disk, graded_points

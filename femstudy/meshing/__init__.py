@@ -3,10 +3,10 @@
 ``build_femur_model(spec, cache_dir, mesh_size_mm=None)`` turns a :class:`FemurSpec` into a
 :class:`FemurModel`:
 
-* ``mesh``    :class:`~femstudy.femur_model.TetMesh` [mm], positively oriented tets with
+* ``mesh``    :class:`~femstudy.femur_mesh.TetMesh` [mm], positively oriented tets with
   region codes CORTICAL, CANCELLOUS_PROXIMAL, CANCELLOUS_DISTAL (the canal has no tets);
-* ``clamps``  :class:`~femstudy.femur_model.Clamps`, outer-surface nodes near each end;
-* ``site``    :class:`~femstudy.femur_model.DrillSite`;
+* ``clamps``  :class:`~femstudy.femur_mesh.Clamps`, outer-surface nodes near each end;
+* ``site``    :class:`~femstudy.femur_mesh.DrillSite`;
 * ``frame``   :class:`~femstudy.meshing.frame.Frame`, units, axes, side, length, overrides;
 * ``quality`` dihedral angles, radius-ratio distribution and poor-tet count;
 * ``stats``   sizes, per-region tets and volumes, surface and canal volumes, TetWild time,

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from femstudy.errors import UserError
-from femstudy.femur_model import CORTICAL, Clamps, DrillSite, TetMesh
+from femstudy.femur_mesh import CORTICAL, Clamps, DrillSite, TetMesh
 from femstudy.meshing.frame import Frame
 
 

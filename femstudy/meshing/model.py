@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from femstudy.errors import UserError
-from femstudy.femur_model import REGION_NAMES, Clamps, DrillSite, TetMesh
+from femstudy.femur_mesh import REGION_NAMES, Clamps, DrillSite, TetMesh
 from femstudy.meshing import cache, landmarks
 from femstudy.meshing.frame import Frame
 

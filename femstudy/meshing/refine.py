@@ -18,7 +18,7 @@ import logging
 
 import numpy as np
 
-from femstudy.femur_model import TetMesh
+from femstudy.femur_mesh import TetMesh
 
 log = logging.getLogger(__name__)
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, REGION_NAMES
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, REGION_NAMES
 
 REGION_COLOURS = {CORTICAL: "#cdb67c", CANCELLOUS_PROXIMAL: "#e07b39", CANCELLOUS_DISTAL: "#6a8fc7"}
 

@@ -149,7 +149,7 @@ def _check_stl_complete(path: Path) -> None:
                         f"of the {announced:,} triangles its binary STL header announces)")
 
 
-def _read_any(path: Path):
+def read_polydata(path: Path):
     """Read ``path`` into a PolyData of its outer faces, or raise UserError.
 
     VTK reads it, and meshio when VTK fails or finds nothing; the first complaint is the
@@ -241,7 +241,7 @@ def read_surface(path: str | Path, bodies: str = "one") -> Surface:
     """
     path = Path(path)
     check_surface_file(path)
-    mesh = _read_any(path)
+    mesh = read_polydata(path)
     require(mesh.n_points > 0 and mesh.n_cells > 0,
             f"cannot read surface file {path}: no triangles in it (is it a valid {path.suffix.lstrip('.').upper()} file?)")
     require(np.isfinite(mesh.points).all(), f"surface file {path} has non-finite point coordinates")

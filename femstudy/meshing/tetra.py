@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
 
 
 def tetrahedralize(surfaces, size_mm: float, envelope: float, threads: int = 0):

@@ -83,10 +83,10 @@ def surface_volume_mm3(path: Path) -> float | None:
     """The enclosed volume of a surface file [mm³], its units guessed from its extent like
     the meshing does; None when the file cannot be read (meshing then says why)."""
     from femstudy.meshing.frame import detect_units
-    from femstudy.meshing.surface import _read_any
+    from femstudy.meshing.surface import read_polydata
 
     try:
-        mesh = _read_any(Path(path)).triangulate()
+        mesh = read_polydata(Path(path)).triangulate()
         extent = float(np.ptp(np.asarray(mesh.points), axis=0).max())
         _, scale, _ = detect_units(extent, "auto")
         return abs(float(mesh.volume)) * scale ** 3

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from femstudy.hole.verdicts import verdict_of
+from femstudy.study.verdicts import verdict_of
 
 
 def _fmt(value, digits: int = 4) -> str:

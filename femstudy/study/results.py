@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from femstudy import thesis
-from femstudy.femur_model import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, REGION_NAMES
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, REGION_NAMES
 
 _CANCELLOUS = {"ultimate": thesis.CANCELLOUS_STRENGTH_MPA["mean"], "source": "thesis Table 2-5, mean (range 0.56-22.9)"}
 #: Strength per region [MPa] for the margin to failure: the lowest longitudinal cortical

@@ -35,8 +35,8 @@ import numpy as np
 
 from femstudy import __version__, atomic, fe
 from femstudy.casefile import Case
-from femstudy.femur_model import REGION_NAMES
-from femstudy.hole import verdicts
+from femstudy.femur_mesh import REGION_NAMES
+from femstudy.study import verdicts
 from femstudy.hole.study import hole_stresses
 from femstudy.lanes import Lanes
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from femstudy import atomic
-from femstudy.sweeps.convergence import assess, coarsest_meeting_target
+from femstudy.convergence import assess, coarsest_meeting_target
 
 MESH_COLUMNS = ["point", "size_mm", "order", "refine", "site_size_mm", "envelope", "nodes", "elements", "dofs", "h_rep_mm",
                 "max_deflection_mm", "drill_point_deflection_mm", "max_von_mises_MPa",

@@ -1,4 +1,4 @@
-"""Failure margins only from converged hole measures (femstudy/hole/verdicts.py)."""
+"""Failure margins only from converged hole measures (femstudy/study/verdicts.py)."""
 
 import json
 
@@ -6,8 +6,8 @@ import pytest
 
 from femstudy.casefile import load_case, parse_case
 from femstudy.errors import UserError
-from femstudy.hole import verdicts
-from femstudy.sweeps.convergence import assess
+from femstudy.study import verdicts
+from femstudy.convergence import assess
 
 CASE = parse_case("name = 't'\n[mesh]\nsize_mm = 8.0\nsite_size_mm = 1.0\norder = 2\n")
 MARGINS = {"basis": "hole", "criterion": "Tsai-Wu", "source": "docs/failure.md",

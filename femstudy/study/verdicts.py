@@ -3,7 +3,7 @@
 A margin to failure means something only where the stress behind it has converged. The
 verdicts come from a measurement of the hole model's convergence on the same femur, global
 mesh and hole refinement as the run — a record written by ``bench/hole_convergence.py --json``
-(three hole refinements judged by :func:`femstudy.sweeps.convergence.assess`, formal order 2,
+(three hole refinements judged by :func:`femstudy.convergence.assess`, formal order 2,
 against the placement noise) — named in the case by ``loads.convergence``. :func:`gate`
 marks each margin row with its measure's verdict and quotes as the *governing* margin the
 smallest strength ratio among the rows whose verdict is "converged" (GCI ≤ 5 %, or within
@@ -28,7 +28,7 @@ import math
 from pathlib import Path
 
 from femstudy.errors import UserError
-from femstudy.sweeps.convergence import GCI_CONVERGED
+from femstudy.convergence import GCI_CONVERGED
 
 #: Conditions a record must share with the run for its verdicts to apply.
 MATCHED = ("surface", "mesh_size_mm", "site_size_mm", "order", "refinement", "submodel_radius_mm", "smoothing_mm")
@@ -45,7 +45,7 @@ def conditions(case) -> dict:
 
 def at_level(assessment, h_mm: float) -> tuple[str, float | None]:
     """Verdict and GCI of the level with mesh measure ``h_mm`` among the three behind
-    ``assessment`` (:class:`femstudy.sweeps.convergence.Assessment`; see the module docstring)."""
+    ``assessment`` (:class:`femstudy.convergence.Assessment`; see the module docstring)."""
     if assessment.verdict != "converged":
         return assessment.verdict, None
     if assessment.order_used is None:  # within the noise or oscillatory: the spread is the estimate
