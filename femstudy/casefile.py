@@ -165,7 +165,10 @@ class DrillSpec(_Section):
 
 
 class DrillingSpec(_Section):
-    """Operating point and load models. ``depth_mm = "cortex"`` drills the local cortex.
+    """Operating point and load models. ``model`` names the dynamic loading's load model
+    (:mod:`femstudy.drilling.registry`: "clogging", cutting + chip evacuation, by default;
+    "allotta", cutting alone; any registered model fit for a study); the static loading is
+    always Allotta's full-engagement load. ``depth_mm = "cortex"`` drills the local cortex.
     ``bone`` names the friction calibration: "human" (thesis Table 5-11; the default, femurs
     here being human), "bovine" (Table 5-1), "human-printed" (the thesis's printed Eqs
     5.8/5.9) or a calibrated set. ``mu_f``/``mu_w`` replace its power law (e.g. to sweep friction);
@@ -175,6 +178,7 @@ class DrillingSpec(_Section):
     the chip-evacuation load is released at breakthrough ("flute": one flute passage); both
     enter the resolved transient only (docs/load-models.md)."""
 
+    model: str = "clogging"
     feed_mm_s: float = Field(2.0, gt=0, le=50)
     spindle_rpm: float = Field(1500.0, gt=0, le=100_000)
     bone: str = "human"
@@ -184,6 +188,16 @@ class DrillingSpec(_Section):
     load_scale: float = Field(1.0, ge=0, le=100)
     flute_oscillation: float = Field(0.1, ge=0, lt=1)
     breakthrough_release_s: Union[Literal["flute"], Annotated[float, Field(gt=0, le=10)]] = "flute"
+
+    @field_validator("model")
+    @classmethod
+    def _registered_model(cls, name: str) -> str:
+        from femstudy.drilling import registry
+
+        choices = registry.names("study")
+        if name not in choices:
+            raise ValueError(f"'{name}' is not a load model for a study: choose one of {', '.join(choices)}")
+        return name
 
 
 class LoadsSpec(_Section):
@@ -341,26 +355,28 @@ def parse_case(text: str, source: Path | None = None) -> Case:
     return case.model_copy(update={"source": source})
 
 
-def with_overrides(case: Case, overrides: dict) -> Case:
-    """A copy of ``case`` with dotted keys replaced (``{"drilling.feed_mm_s": 1.5}``), validated."""
+def with_overrides(case: Case, overrides: dict, what: str = "sweep") -> Case:
+    """A copy of ``case`` with dotted keys replaced (``{"drilling.feed_mm_s": 1.5}``), validated
+    like a case file's values; ``what`` names the overrides' origin in error messages (a sweep,
+    an option such as --mesh-size)."""
     data = case.model_dump(mode="json", exclude={"source"})
     for dotted, value in overrides.items():
         node = data
         *parents, last = dotted.split(".")
         for key in parents:
             if not isinstance(node.get(key), dict):
-                raise UserError(f"sweep key '{dotted}': '{key}' is not a section of a case file")
+                raise UserError(f"{what} key '{dotted}': '{key}' is not a section of a case file")
             node = node[key]
         if last not in node:
             near = difflib.get_close_matches(last, list(node), n=1)
             hint = f"; did you mean '{'.'.join(parents + [near[0]])}'?" if near else ""
-            raise UserError(f"sweep key '{dotted}' is not a case-file key{hint}")
+            raise UserError(f"{what} key '{dotted}' is not a case-file key{hint}")
         node[last] = value
     try:
         updated = Case.model_validate(data)
     except ValidationError as exc:
         _, message = describe(exc.errors(), Case)
-        raise UserError(f"sweep value out of range: {message}") from None
+        raise UserError(f"{what} value out of range: {message}") from None
     return updated.model_copy(update={"source": case.source})
 
 

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from femstudy.casefile import parse_case
-from femstudy.drilling import DrillingConditions, MODELS, Drill, evaluate, time_grid
+from femstudy.drilling import DrillingConditions, Drill, evaluate, registry, time_grid
 from femstudy.errors import UserError
 from femstudy.recordings import read_recording
 
@@ -30,7 +30,7 @@ def test_valid_operating_points_give_finite_nonnegative_loads(feed, rpm, cortex,
     cond = DrillingConditions(feed, rpm, cortex, drill=Drill(diameter_mm=diameter, point_angle_deg=angle),
                               friction_override=(0.2, 0.58))
     t = time_grid(cond, cond.phase_times()["fully in cancellous"] / 50)
-    for model in MODELS:
+    for model in registry.names():
         h = evaluate(model, cond, t)
         assert np.all(np.isfinite(h.thrust_N)) and np.all(h.thrust_N >= 0)
         torque = h.torque_Nmm[~np.isnan(h.torque_Nmm)]

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from femstudy.drilling import clogging
-from femstudy.drilling.history import MODELS, DrillingConditions, evaluate, time_grid
+from femstudy.drilling import registry
+from femstudy.drilling.history import DrillingConditions, evaluate, time_grid
 from femstudy.drilling.literature import chi_thrust
 from femstudy.errors import UserError
 
@@ -58,7 +59,7 @@ def test_time_grid_ends_exactly_at_the_span():
 
 
 def test_every_model_evaluates_finite_thrust():
-    for model in MODELS:
+    for model in registry.names():
         assert np.all(np.isfinite(evaluate(model, COND, time_grid(COND, 0.05)).thrust_N))
 
 

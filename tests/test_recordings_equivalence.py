@@ -22,7 +22,7 @@ from femstudy.recordings.dataset import random_effects
 from femstudy.recordings.formats.text import TextStyle
 from femstudy.recordings.pipeline import calibrate
 from femstudy.recordings.processing import process
-from femstudy.recordings.reader import FORMAT_SUFFIXES
+from femstudy.recordings.formats import registry
 
 #: the variant each new way of writing is compared with first
 PLAIN = "comma"
@@ -61,7 +61,7 @@ RATE_HZ = 250.0
 
 def write(path_stem, rec, options):
     fmt = options["format"]
-    path = path_stem.with_suffix(FORMAT_SUFFIXES[fmt] if isinstance(fmt, str) else ".csv")
+    path = path_stem.with_suffix(registry.writers()[fmt].suffix if isinstance(fmt, str) else ".csv")
     write_recording(path, rec, options.get("torque_unit", "Nmm"), format=fmt,
                     time_unit=options.get("time_unit", "s"), force_unit=options.get("force_unit", "N"))
     return path

@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from femstudy.commands.metadata import add_metadata_options, parse_settings
+from femstudy.drilling import registry
 from femstudy.errors import require
 
 
@@ -24,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     what.add_argument("--simulation", type=Path, metavar="SIM.csv",
                       help="a simulated trace in the recording format (any sampling rate, span and "
                            "clock: it is placed on the recording's by correlation)")
-    what.add_argument("--model", choices=("allotta", "clogging"),
+    what.add_argument("--model", choices=registry.names("diagnosis"),
                       help="a femstudy load model for the recording's feed, speed and drill, started "
                            "at its detected contact")
     p.add_argument("--bone", default="bovine",

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from femstudy.recordings.reader import WRITE_FORMATS
+from femstudy.drilling import registry
+from femstudy.recordings.formats import registry as formats
 from femstudy.recordings.synthetic import EFFECT_OPTIONS
 
 
@@ -22,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--feed", type=float, default=1.5, metavar="MM_S", help="feed rate f [mm/s] (1.5)")
     p.add_argument("--rpm", type=float, default=1500.0, help="spindle speed N [rpm] (1500)")
     p.add_argument("--cortex-mm", type=float, default=6.0, help="cortical thickness [mm] (6)")
-    p.add_argument("--model", choices=("clogging", "allotta"), default="clogging", help="(clogging)")
+    p.add_argument("--model", choices=registry.names("synthesis"), default="clogging", help="(clogging)")
     p.add_argument("--bone", default="bovine", help="bone set giving friction and cutting energies (bovine)")
     p.add_argument("--mu-f", type=float, help="flute friction mu_f (default: the bone set at f, N)")
     p.add_argument("--mu-w", type=float, help="wall friction mu_w (default: the bone set at f, N)")
@@ -32,7 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--stop-depth-mm", type=float, help="depth where the feed stops (cortex + 2 mm; "
                                                       "less than the cortex ends the cut by retraction)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
-    p.add_argument("--format", choices=WRITE_FORMATS, help="file format (default: from the suffix, else csv)")
+    p.add_argument("--format", choices=list(formats.writers()), help="file format (default: from the suffix, else csv)")
     p.add_argument("--time-unit", default="s", help="time column unit, e.g. s or ms (s)")
     p.add_argument("--force-unit", default="N", help="thrust column unit, e.g. N, kN or lbf (N)")
     p.add_argument("--torque-unit", default="Nmm", help="torque column unit, e.g. Nmm, N*m or lbf*in (Nmm)")

@@ -14,11 +14,11 @@ from scipy import ndimage
 
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.timing import clock_offset_s, trace_events
+from femstudy.drilling import registry
 from femstudy.drilling.history import DrillingConditions
 from femstudy.errors import UserError, require
 from femstudy.recordings.reader import Recording, read_recording
 
-DIAGNOSED_MODELS = ("allotta", "clogging")
 #: A trace whose best correlation lag exceeds this runs on a clock of its own [s].
 CLOCK_TOLERANCE_S = 0.3
 
@@ -155,7 +155,7 @@ def feed_stop_s(rec: Recording, after_s: float) -> float:
 def model_simulation(rec: Recording, model: str, bone, cortex_mm: float | None) -> tuple[ModelSimulation, float, list]:
     """Load model ``model`` for the recording's conditions, from its detected contact to its
     stop; returns it, the cortex [mm] and notes on how the cortex was found."""
-    require(model in DIAGNOSED_MODELS, f"--model must be one of {', '.join(DIAGNOSED_MODELS)}, got '{model}'")
+    registry.get(model, "diagnosis")
     phase = cut_phase(rec)
     cortex, notes = cortex_thickness(rec, cortex_mm, phase)
     cond = DrillingConditions(rec.feed_mm_s, rec.spindle_rpm, cortex, bone, rec.drill)

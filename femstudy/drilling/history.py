@@ -6,17 +6,10 @@ l ≤ d ≤ h (cortex of thickness h), transition h < d < h + l (cone crossing i
 bone), cancellous d ≥ h + l. "Breakthrough" is the instant the tip reaches the inner
 surface of the cortex, d = h.
 
-How cutting and chip evacuation combine (model "clogging"):
-
-    F(d) = F_cut(d) + F_o (exp(p z) − 1) · s(d)
-    T(d) = T_cut(d) + R μ_w l_w F_o / M · (exp(p z) − 1) · s(d)
-
-F_cut, T_cut are Allotta's cutting loads (Eqs 2.18–2.19); F_o = F_cut at full engagement,
-so in the cortex F = F_o exp(p z) exactly as Eq 3.16 and T = T_o + T_c(z) with T_c of
-Eq 3.19 (which is zero at z = 0 and carries no cutting torque). z = (min(d, h) − l)/D ≥ 0
-is the depth past full engagement in diameters, frozen at breakthrough. s(d) is the share
-of the tip cone still in cortex (1 during full engagement): the evacuation load fades out
-over the transition, as recorded forces fall to about zero once the drill is through.
+Each model is registered in :mod:`femstudy.drilling.registry` by its own module in
+:mod:`femstudy.drilling.models` (Allotta's cutting, cutting + chip evacuation, Chi, Peng) and
+gives its loads as a cutting and a chip-evacuation part; :func:`evaluate` adds them and the
+per-flute oscillation. Units: s, mm, N, N·mm.
 """
 
 from __future__ import annotations
@@ -25,24 +18,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from femstudy import thesis
-from femstudy.drilling import allotta, clogging, literature
+from femstudy.drilling import allotta, clogging, registry
 from femstudy.drilling.drill import Drill, feed_per_revolution
 from femstudy.drilling.friction import BoneSet, builtin_bone_set
+from femstudy.drilling.registry import LoadParts
 from femstudy.errors import require
-
-MODELS = ("allotta", "clogging", "chi", "peng")
-MODEL_TITLES = {
-    "allotta": "Allotta cutting (Eqs 2.18-2.19)",
-    "clogging": "cutting + chip evacuation (Eqs 3.16/3.19)",
-    "chi": "Chi empirical thrust (Eq 2.24)",
-    "peng": "Peng simplified (Eqs 2.20-2.21)",
-}
-
-#: Peng's material strength R_a [MPa]: Table 2-4's longitudinal tensile strength for the
-#: cortex and Table 2-5's mean for cancellous bone.
-CORTICAL_TENSILE_STRENGTH_MPA = thesis.CORTICAL_STRENGTH_MPA["longitudinal_tension_ultimate"]
-CANCELLOUS_STRENGTH_MPA = thesis.CANCELLOUS_STRENGTH_MPA["mean"]
 
 
 @dataclass(frozen=True)
@@ -126,42 +106,24 @@ class LoadHistory:
     torque_Nmm: np.ndarray
 
 
-def evaluate(model: str, cond: DrillingConditions, time_s, content: DynamicContent = DynamicContent()) -> LoadHistory:
-    """Evaluate one load model at the given times [s] after contact (vectorised); ``content``
-    adds the per-flute oscillation and the breakthrough release (model "clogging" only)."""
-    require(model in MODELS, f"unknown load model '{model}': choose one of {', '.join(MODELS)}")
+def load_parts(model: str, cond: DrillingConditions, time_s, content: DynamicContent = DynamicContent()) -> LoadParts:
+    """The cutting and chip-evacuation parts of one registered load model at the given times [s]
+    after contact (:mod:`femstudy.drilling.registry`), without the per-flute oscillation."""
     t = np.asarray(time_s, dtype=float)
-    d = np.maximum(cond.feed_mm_s * t, 0.0)
-    a, h, drill, bone = cond.feed_per_rev_mm, cond.cortex_mm, cond.drill, cond.bone
-    in_cortex = (d > 0) & (d <= h)
-    in_cancellous = d > h
-    if model in ("allotta", "clogging"):
-        F = allotta.thrust(d, a, h, bone.u1_MPa, bone.u2_MPa, drill)
-        T = allotta.torque(d, a, h, bone.u1_MPa, bone.u2_MPa, drill)
-        if model == "clogging":
-            F0, _ = cond.static_allotta()
-            mu_f, mu_w = cond.friction
-            l = drill.cone_length_mm
-            z = np.maximum((np.minimum(d, h) - l) / drill.diameter_mm, 0.0)
-            cone_in_cortex = np.clip(np.minimum(d, h) - np.maximum(d - l, 0.0), 0.0, l) / l
-            if content.release_s is not None:  # released within release_s of breakthrough (t = h/f)
-                cone_in_cortex = np.clip(1 - (t - h / cond.feed_mm_s) / content.release_s, 0.0, 1.0) * (d > 0)
-            F = F + (clogging.thrust(z, F0, mu_f, mu_w, drill) - F0) * cone_in_cortex
-            T = T + clogging.torque(z, F0, mu_f, mu_w, drill) * cone_in_cortex
-            if content.flute_oscillation:
-                wave = 1 + content.flute_oscillation * np.sin(2 * np.pi * drill.flute_passing_hz(cond.spindle_rpm) * t)
-                F, T = F * wave, T * wave
-    elif model == "chi":
-        F = (in_cortex * literature.chi_thrust(cond.feed_mm_s, cond.spindle_rpm, thesis.CORTICAL_DENSITY_G_CM3)
-             + in_cancellous * literature.chi_thrust(cond.feed_mm_s, cond.spindle_rpm,
-                                                     thesis.CANCELLOUS_DENSITY_G_CM3))
-        T = np.full_like(d, np.nan)
-    else:  # peng
-        F = (in_cortex * literature.peng_thrust(a, bone.u1_MPa, drill)
-             + in_cancellous * literature.peng_thrust(a, bone.u2_MPa, drill))
-        T = (in_cortex * literature.peng_torque(a, CORTICAL_TENSILE_STRENGTH_MPA, drill)
-             + in_cancellous * literature.peng_torque(a, CANCELLOUS_STRENGTH_MPA, drill))
-    return LoadHistory(model, t, d, np.asarray(F, float), np.asarray(T, float))
+    return registry.get(model).parts(cond, t, np.maximum(cond.feed_mm_s * t, 0.0), content)
+
+
+def evaluate(model: str, cond: DrillingConditions, time_s, content: DynamicContent = DynamicContent()) -> LoadHistory:
+    """Evaluate one registered load model at the given times [s] after contact (vectorised);
+    ``content`` adds the per-flute oscillation (to the total) and the breakthrough release (to
+    the chip-evacuation part)."""
+    t = np.asarray(time_s, dtype=float)
+    parts = load_parts(model, cond, t, content)
+    F, T = parts.thrust_N, parts.torque_Nmm
+    if content.flute_oscillation:
+        wave = 1 + content.flute_oscillation * np.sin(2 * np.pi * cond.drill.flute_passing_hz(cond.spindle_rpm) * t)
+        F, T = F * wave, T * wave
+    return LoadHistory(model, t, np.maximum(cond.feed_mm_s * t, 0.0), np.asarray(F, float), np.asarray(T, float))
 
 
 def time_grid(cond: DrillingConditions, dt_s: float, end_s: float | None = None) -> np.ndarray:

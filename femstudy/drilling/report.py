@@ -10,12 +10,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from femstudy import atomic
-from femstudy.drilling.history import MODEL_TITLES, DrillingConditions, LoadHistory, evaluate
+from femstudy.drilling import registry
+from femstudy.drilling.history import DrillingConditions, LoadHistory, evaluate
 
 log = logging.getLogger(__name__)
 
 CSV_COLUMNS = ["model", "time_s", "depth_mm", "thrust_N", "torque_Nmm"]
-MODEL_COLOURS = {"allotta": "tab:blue", "clogging": "tab:orange", "chi": "tab:green", "peng": "tab:red"}
 
 
 def key_points(cond: DrillingConditions, models) -> list[dict]:
@@ -79,7 +79,8 @@ def plot(path, cond: DrillingConditions, histories: list[LoadHistory]) -> None:
 
     fig, (ax_f, ax_t) = plt.subplots(2, 1, figsize=(8, 7.5), sharex=True, constrained_layout=True)
     for h in histories:
-        style = {"label": MODEL_TITLES[h.model], "color": MODEL_COLOURS[h.model]}
+        model = registry.get(h.model)
+        style = {"label": model.title, "color": model.colour}
         ax_f.plot(h.time_s, h.thrust_N, **style)
         if not np.all(np.isnan(h.torque_Nmm)):
             ax_t.plot(h.time_s, h.torque_Nmm, **style)
@@ -151,7 +152,7 @@ def load_models(feed_mm_s: float, spindle_rpm: float, *, bone: str = "bovine", c
     """
     from dataclasses import replace
 
-    from femstudy.drilling import MODELS, Drill, load_bone_set, time_grid
+    from femstudy.drilling import Drill, load_bone_set, time_grid
     from femstudy.errors import require
 
     require(plot_path is None or str(plot_path).lower().endswith((".png", ".pdf", ".svg")),
@@ -167,9 +168,10 @@ def load_models(feed_mm_s: float, spindle_rpm: float, *, bone: str = "bovine", c
     if not bone_set.in_calibrated_range(feed_mm_s, spindle_rpm):
         log.warning("f = %g mm/s, N = %g rpm lies outside the conditions bone set '%s' was calibrated on; its "
                     "power law is extrapolated", feed_mm_s, spindle_rpm, bone_set.name)
-    histories = [evaluate(m, cond, time_grid(cond, dt_s)) for m in MODELS]
+    models = registry.names()
+    histories = [evaluate(m, cond, time_grid(cond, dt_s)) for m in models]
     if csv_path:
         write_csv(csv_path, histories)
     if plot_path:
         plot(plot_path, cond, histories)
-    return LoadStudy(cond, histories, summary_text(cond, MODELS))
+    return LoadStudy(cond, histories, summary_text(cond, models))

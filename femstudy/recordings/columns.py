@@ -95,8 +95,8 @@ def parse_column_map(spec: str | Mapping[str, Any] | None, origin: str) -> dict[
     dict
         Quantity (``time``, ``thrust``, ``torque``, ``depth``, ``fx``, ``fy``) -> ColumnRef.
 
-    Example
-    -------
+    Examples
+    --------
     >>> parse_column_map("thrust=Fz[kN], torque=Mz", "--columns")["thrust"]
     ColumnRef(name='Fz', unit='kN')
     """
@@ -147,8 +147,8 @@ def assign_channels(names: Sequence[str], units: Sequence[str | None], column_ma
     list of Channel
         Time and thrust always; torque, depth, fx, fy when present.
 
-    Example
-    -------
+    Examples
+    --------
     >>> [c.quantity for c in assign_channels(["Zeit [ms]", "Fz", "Mz"], [None, "N", "N*m"], {}, "r.txt")]
     ['time', 'thrust', 'torque']
     """

@@ -30,7 +30,8 @@ import numpy as np
 from femstudy import atomic
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
-from femstudy.recordings.reader import FORMAT_SUFFIXES, Recording, write_recording
+from femstudy.recordings.formats import registry
+from femstudy.recordings.reader import Recording, write_recording
 from femstudy.recordings.synthetic import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, synthesize
 
 #: Table 4-1 calibration conditions and Table 5-3 validation conditions, (f [mm/s], N [rpm]).
@@ -132,7 +133,7 @@ def write_dataset(folder, bone: str | BoneSet = "bovine", replicates: int = 10, 
     sample_rate_hz : float
     torque_unit : {"Nmm", "Nm"}
     format : str, optional
-        One of :data:`~femstudy.recordings.reader.WRITE_FORMATS` (default: CSV).
+        One of a registered format (:func:`femstudy.recordings.formats.registry.writers`) (default: CSV).
 
     Returns
     -------
@@ -144,21 +145,20 @@ def write_dataset(folder, bone: str | BoneSet = "bovine", replicates: int = 10, 
     >>> print(write_dataset("demo", replicates=4))   # doctest: +SKIP
     """
     require(replicates >= 1, f"--replicates must be at least 1, got {replicates}")
-    require(format is None or format in FORMAT_SUFFIXES,
-            f"unknown recording format '{format}'; choose one of {', '.join(FORMAT_SUFFIXES)}")
+    writer = registry.writer_for("recording.csv", format)  # an unknown format fails here, before any work
     bone_set = load_bone_set(bone) if isinstance(bone, str) else bone
     runs = dataset_recordings(bone_set, replicates=replicates, outliers=outliers, seed=seed,
                               sample_rate_hz=sample_rate_hz)
     truth = io.StringIO()
-    writer = csv.writer(truth, lineterminator="\n")
-    writer.writerow(TRUTH_COLUMNS)
+    truth_rows = csv.writer(truth, lineterminator="\n")
+    truth_rows.writerow(TRUTH_COLUMNS)
     with atomic.atomic_folder(folder) as tmp:
-        suffix = FORMAT_SUFFIXES[format or "csv"]
+        suffix = writer.suffix
         for k, (relative, rec) in enumerate(runs):
             relative = str(Path(relative).with_suffix(suffix))
-            write_recording(tmp / relative, rec, torque_unit, format=format or "csv")
+            write_recording(tmp / relative, rec, torque_unit, format=writer.name)
             m = rec.metadata
-            writer.writerow([relative] + [m[c] if not isinstance(m[c], float) else f"{m[c]:.6g}"
+            truth_rows.writerow([relative] + [m[c] if not isinstance(m[c], float) else f"{m[c]:.6g}"
                                           for c in TRUTH_COLUMNS[1:]])
             log.info("synthesised %d/%d runs", k + 1, len(runs), extra={"progress": ("runs", k + 1, len(runs))})
         atomic.write_text(tmp / "truth.csv", truth.getvalue())
@@ -182,7 +182,7 @@ def write_synthetic(path, *, format: str | None = None, time_unit: str = "s", fo
     path : path-like
         The recording to write; the format comes from ``format``, else the suffix.
     format : str, optional
-        One of :data:`~femstudy.recordings.reader.WRITE_FORMATS`.
+        One of a registered format (:func:`femstudy.recordings.formats.registry.writers`).
     time_unit, force_unit, torque_unit : str
         Units of the written columns (e.g. "ms", "kN", "N*m"); the values are converted.
     plot : path-like, optional

@@ -110,8 +110,8 @@ def validate_metadata(found: Mapping[str, Any], origins: Mapping[str, str], over
     (dict, list of str)
         Every key with its checked value (defaults filled in), and notes on overrides.
 
-    Example
-    -------
+    Examples
+    --------
     >>> meta, notes = validate_metadata({"feed_mm_s": 1.5, "spindle_rpm": 1500}, {}, {}, False, "r.csv", "")
     >>> meta["drill_diameter_mm"]
     2.7

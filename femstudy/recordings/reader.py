@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -31,8 +32,7 @@ import numpy as np
 from femstudy.drilling.drill import Drill
 from femstudy.errors import UserError, require
 from femstudy.recordings.columns import assign_channels, parse_column_map
-from femstudy.recordings.formats import excel, matlab, tdms, text
-from femstudy.recordings.formats.table import Table
+from femstudy.recordings.formats import registry, text
 from femstudy.recordings.formats.text import TextStyle
 from femstudy.recordings.metadata import check_declared_samples, validate_metadata
 from femstudy.recordings.units import QUANTITY_UNITS, factor_to_solver
@@ -42,25 +42,6 @@ MIN_RATE_HZ, MAX_RATE_HZ = 100.0, 10_000.0
 #: (40 minutes at 10 kHz). Longer recordings should be split.
 MAX_FILE_BYTES = 1 << 30
 MAX_SAMPLES = 25_000_000
-#: what a folder of recordings may hold
-RECORDING_SUFFIXES = (".csv", ".tsv", ".txt", ".tdms", ".mat", ".xlsx")
-#: the formats :func:`write_recording` writes, by name
-WRITE_FORMATS = {
-    "csv": TextStyle(),
-    "csv-semicolon": TextStyle(delimiter=";"),
-    "tsv": TextStyle(delimiter="\t"),
-    "decimal-comma": TextStyle(delimiter=";", decimal=","),
-    "excel-csv": TextStyle(delimiter=";", decimal=",", bom=True, newline="\r\n"),
-    "dynoware": TextStyle(delimiter="\t", block_header=True),
-    "tdms": tdms.write_table,
-    "mat": matlab.write_table,
-    "mat73": matlab.write_table_v73,
-    "xlsx": excel.write_table,
-}
-#: the usual file suffix of each format
-FORMAT_SUFFIXES = {"csv": ".csv", "csv-semicolon": ".csv", "tsv": ".tsv", "decimal-comma": ".csv",
-                   "excel-csv": ".csv", "dynoware": ".txt", "tdms": ".tdms", "mat": ".mat", "mat73": ".mat",
-                   "xlsx": ".xlsx"}
 _SOLVER_UNIT_WORDS = {"s": "s", "N": "N", "N*mm": "N·mm", "mm": "mm"}
 
 
@@ -131,8 +112,8 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
     Recording
         Arrays in femstudy's units; ``notes`` lists unit conversions and overrides.
 
-    Example
-    -------
+    Examples
+    --------
     >>> rec = read_recording("run.txt", {"feed_mm_s": 1.5, "spindle_rpm": 1500},
     ...                      columns="time=Zeit[ms],thrust=Fz[kN]")  # doctest: +SKIP
     """
@@ -147,7 +128,7 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
         require(size > 0, f"recording {name} is empty")
         require(size <= MAX_FILE_BYTES, f"recording {name} is {size / 2**30:.1f} GiB; femstudy reads recordings "
                                         f"up to 1 GiB (about 25 million rows): split it")
-        table = _read_table(path, name)
+        table = registry.read_table(path, name)
         metadata, notes = validate_metadata(table.metadata, table.origins, overrides or {}, override_header,
                                             name, table.how_to_add)
         check_declared_samples(metadata, MAX_SAMPLES, name)
@@ -169,24 +150,6 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
                     metadata=metadata, source=str(path), notes=tuple(notes))
     check_recording(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
     return rec
-
-
-def _read_table(path: Path, name: str) -> Table:
-    """The format's reader, chosen by the file's first bytes, then by its name."""
-    with path.open("rb") as raw:
-        head = raw.read(matlab.USER_BLOCK + 8)
-    suffix = path.suffix.lower()
-    if head.startswith(tdms.MAGIC):
-        return tdms.read_table(path, name)
-    if head.startswith(excel.ZIP_SIGNATURE):
-        return excel.read_table(path, name)
-    if matlab.is_mat(head) or head.startswith(matlab.HDF5_SIGNATURE) or suffix == ".mat":
-        return matlab.read_table(path, name)
-    kinds = {".tdms": "a TDMS file", ".xlsx": "an Excel .xlsx workbook", ".xls": "an Excel workbook"}
-    if suffix in kinds:
-        hint = " (old .xls workbooks are not read: save it as .xlsx or CSV)" if suffix == ".xls" else ""
-        raise UserError(f"recording {name} has a {suffix} name but is not {kinds[suffix]}{hint}")
-    return text.read_table(path, name)
 
 
 def check_recording(rec: Recording, where: Callable[[int], str] | None = None,
@@ -240,7 +203,7 @@ _SOLVER_COLUMNS = {"time": ("time_s", "s"), "thrust": ("thrust_N", "N"), "torque
 
 def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = "Nmm", *,
                     format: str | TextStyle | None = None, time_unit: str = "s", force_unit: str = "N") -> None:
-    """Write ``rec`` in one of :data:`WRITE_FORMATS` (atomically), in the units asked for.
+    """Write ``rec`` in a registered format (atomically), in the units asked for.
 
     Parameters
     ----------
@@ -252,8 +215,9 @@ def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = 
         Units of the written columns (any unit pint reads: ``N·m``, ``ms``, ``kN``, ``lbf`` ...);
         thrust, fx and fy share ``force_unit``, depth is in mm.
     format : str or TextStyle, optional
-        A name from :data:`WRITE_FORMATS`, or a :class:`TextStyle`; by default from the
-        suffix (.tsv, .txt DynoWare-like, .tdms, .mat, .xlsx; anything else CSV).
+        A registered format's name (:func:`femstudy.recordings.formats.registry.writers`), or a
+        :class:`TextStyle`; by default from the suffix (.tsv, .txt DynoWare-like, .tdms, .mat,
+        .xlsx; anything else CSV).
 
     Returns
     -------
@@ -263,12 +227,10 @@ def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = 
     --------
     >>> write_recording("run.xlsx", rec, "N*m", time_unit="ms")  # doctest: +SKIP
     """
-    suffix_formats = {".tsv": "tsv", ".txt": "dynoware", ".tdms": "tdms", ".mat": "mat", ".xlsx": "xlsx"}
-    chosen = suffix_formats.get(Path(path).suffix.lower(), "csv") if format is None else format
-    if isinstance(chosen, str):
-        require(chosen in WRITE_FORMATS, f"unknown recording format '{chosen}'; choose one of "
-                                         f"{', '.join(WRITE_FORMATS)}")
-        chosen = WRITE_FORMATS[chosen]
+    if isinstance(format, TextStyle):
+        write = partial(text.write_table, style=format)
+    else:
+        write = registry.writer_for(path, format).write
     units = {"time": time_unit, "thrust": force_unit, "torque": torque_unit, "depth": "mm", "fx": force_unit,
              "fy": force_unit}
     columns = []
@@ -278,7 +240,4 @@ def write_recording(path: str | os.PathLike, rec: Recording, torque_unit: str = 
             factor = factor_to_solver(units[quantity], quantity, f"the {quantity} column to write")
             columns.append((quantity, units[quantity], np.asarray(values, dtype=float) / factor))
     metadata = {**rec.metadata, "samples": int(rec.time_s.size)}
-    if isinstance(chosen, TextStyle):
-        text.write_table(path, columns, metadata, chosen)
-    else:
-        chosen(path, columns, metadata)
+    write(path, columns, metadata)

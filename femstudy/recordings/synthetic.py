@@ -26,14 +26,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from femstudy.drilling import Drill
+from femstudy.drilling import Drill, registry
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.drilling.history import DrillingConditions, evaluate
 from femstudy.errors import require
 from femstudy.recordings.reader import Recording
-
-SYNTH_MODELS = ("clogging", "allotta")
-
 
 #: (option, Effects field, parameter, default, help) of every switchable effect; 0 switches it off.
 EFFECT_OPTIONS = [
@@ -207,7 +204,7 @@ def synthesize(feed_mm_s: float = 1.5, spindle_rpm: float = 1500.0, *, cortex_mm
     >>> round(rec.metadata["true_mu_f"], 3) > 0
     True
     """
-    require(model in SYNTH_MODELS, f"synthetic model must be one of {', '.join(SYNTH_MODELS)}, got '{model}'")
+    registry.get(model, "synthesis")
     require(100 <= sample_rate_hz <= 10_000, f"sample rate must lie in 100 Hz-10 kHz, got {sample_rate_hz}")
     require(approach_s > 0 and tail_s > 0, "approach_s and tail_s must be positive")
     _check_effects(effects)

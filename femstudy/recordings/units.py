@@ -85,8 +85,8 @@ def factor_to_solver(unit_text: str, quantity: str, subject: str) -> float:
     float
         The conversion factor (1000 for kN → N, 1e-3 for ms → s, 1000 for N·m → N·mm).
 
-    Example
-    -------
+    Examples
+    --------
     >>> factor_to_solver("kN", "thrust", "column 'Fz [kN]'")
     1000.0
     """

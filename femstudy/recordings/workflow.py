@@ -21,14 +21,16 @@ FIGURES = ("fits.png", "power_law.png", "validation.png", "normality.png", "ann_
 
 def recording_paths(items, what: str) -> list[Path]:
     """Files as given, folders expanded to their recordings (any suffix in
-    :data:`~femstudy.recordings.reader.RECORDING_SUFFIXES`, sorted); names must be unique."""
-    from femstudy.recordings.reader import RECORDING_SUFFIXES
+    :func:`~femstudy.recordings.formats.registry.recording_suffixes`, sorted); names must be unique."""
+    from femstudy.recordings.formats.registry import recording_suffixes
+
+    suffixes = recording_suffixes()
 
     paths = []
     for item in map(Path, items):
         if item.is_dir():
-            found = sorted(p for p in item.iterdir() if p.suffix.lower() in RECORDING_SUFFIXES and p.is_file())
-            require(found, f"{what}: folder {item} has no recordings ({', '.join(RECORDING_SUFFIXES)} files)")
+            found = sorted(p for p in item.iterdir() if p.suffix.lower() in suffixes and p.is_file())
+            require(found, f"{what}: folder {item} has no recordings ({', '.join(suffixes)} files)")
             paths += found
         else:
             require(item.exists(), f"{what}: recording {item} does not exist")

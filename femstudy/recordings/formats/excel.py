@@ -15,6 +15,7 @@ import numpy as np
 
 from femstudy import atomic
 from femstudy.errors import UserError
+from femstudy.recordings.formats.registry import Reader, Writer, register_reader, register_writer
 from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, plain_value
 from femstudy.recordings.units import is_units_row
@@ -124,3 +125,9 @@ def write_table(path, columns: list[tuple[str, str, np.ndarray]], metadata: dict
     with atomic.atomic_path(path) as tmp:
         with open(tmp, "wb") as stream:
             book.save(stream)
+
+
+register_reader(Reader("excel", read_table, lambda head: head.startswith(ZIP_SIGNATURE), (".xlsx",),
+                       {".xlsx": "an Excel .xlsx workbook", ".xls": "an Excel workbook (old .xls workbooks are not "
+                                                                     "read: save it as .xlsx or CSV)"}))
+register_writer(Writer("xlsx", write_table, ".xlsx", default_for_suffix=True))

@@ -16,6 +16,7 @@ import numpy as np
 from femstudy import atomic
 from femstudy.errors import UserError, require
 from femstudy.recordings.columns import CHANNEL_NAMES
+from femstudy.recordings.formats.registry import Reader, Writer, register_reader, register_writer
 from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, plain_value
 
@@ -172,3 +173,9 @@ def _write_hdf5_value(group, key: str, value) -> None:
             np.bytes_("int64")
     else:
         group.create_dataset(key, data=np.array([[float(value)]])).attrs["MATLAB_class"] = np.bytes_("double")
+
+
+register_reader(Reader("matlab", read_table, lambda head: is_mat(head) or head.startswith(HDF5_SIGNATURE), (".mat",),
+                       {".mat": None}))
+register_writer(Writer("mat", write_table, ".mat", default_for_suffix=True))
+register_writer(Writer("mat73", write_table_v73, ".mat"))

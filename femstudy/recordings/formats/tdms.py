@@ -17,6 +17,7 @@ import numpy as np
 from femstudy import atomic
 from femstudy.errors import UserError, require
 from femstudy.recordings.columns import CHANNEL_NAMES, quantity_of, split_name
+from femstudy.recordings.formats.registry import Reader, Writer, register_reader, register_writer
 from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, plain_value
 
@@ -86,3 +87,8 @@ def write_table(path, columns: list[tuple[str, str, np.ndarray]], metadata: dict
     with atomic.atomic_path(path) as tmp:
         with open(tmp, "wb") as stream, TdmsWriter(stream) as writer:
             writer.write_segment(objects)
+
+
+register_reader(Reader("tdms", read_table, lambda head: head.startswith(MAGIC), (".tdms",),
+                       {".tdms": "a TDMS file"}))
+register_writer(Writer("tdms", write_table, ".tdms", default_for_suffix=True))

@@ -22,6 +22,7 @@ import re
 import tomllib
 import warnings
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Iterator
 
@@ -30,6 +31,7 @@ import numpy as np
 from femstudy import atomic
 from femstudy.errors import UserError
 from femstudy.recordings.columns import CHANNEL_NAMES
+from femstudy.recordings.formats.registry import Reader, Writer, register_reader, register_writer
 from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, parse_text_value
 from femstudy.recordings.units import is_units_row
@@ -274,3 +276,13 @@ def write_table(path, columns: list[tuple[str, str, np.ndarray]], metadata: dict
 def compact_unit(unit: str) -> str:
     """A unit as a column-name suffix: ``N·m`` → ``Nm``, ``lbf*in`` → ``lbfin``."""
     return re.sub(r"[\s·*⋅]", "", unit)
+
+
+register_reader(Reader("text", read_table, None, (".csv", ".tsv", ".txt")))
+for _name, _style, _suffix in (("csv", TextStyle(), ".csv"), ("csv-semicolon", TextStyle(delimiter=";"), ".csv"),
+                               ("tsv", TextStyle(delimiter="\t"), ".tsv"),
+                               ("decimal-comma", TextStyle(delimiter=";", decimal=","), ".csv"),
+                               ("excel-csv", TextStyle(delimiter=";", decimal=",", bom=True, newline="\r\n"), ".csv"),
+                               ("dynoware", TextStyle(delimiter="\t", block_header=True), ".txt")):
+    register_writer(Writer(_name, partial(write_table, style=_style), _suffix,
+                           default_for_suffix=_name in ("csv", "tsv", "dynoware")))
