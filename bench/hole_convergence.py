@@ -31,14 +31,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from femstudy import fe  # noqa: E402
 from femstudy.atomic import write_text  # noqa: E402
-from femstudy.casefile import load_case  # noqa: E402
+from femstudy.casefile import load_case, with_overrides  # noqa: E402
 from femstudy.study import verdicts  # noqa: E402
 from femstudy.hole.mesh import Resolution  # noqa: E402
 from femstudy.hole.study import hole_stresses  # noqa: E402
 from femstudy.jsonable import jsonable  # noqa: E402
-from femstudy.study.femur import femur_model  # noqa: E402
+from femstudy.study.global_model import prepare  # noqa: E402
 from femstudy.study.loading import case_loading  # noqa: E402
 from femstudy.convergence import assess  # noqa: E402
 
@@ -54,12 +53,14 @@ def main() -> None:
     args = parser.parse_args()
     case = load_case(args.case)
     start = time.perf_counter()
-    model = femur_model(case, Path(args.cache), args.mesh_size)
+    if args.mesh_size is not None:
+        case = with_overrides(case, {"mesh.size_mm": args.mesh_size}, what="--mesh-size")
+    global_model = prepare(case, Path(args.cache))
+    model, system = global_model.femur, global_model.system
     loading = case_loading(case, model.site.cortical_thickness_mm)
-    system = fe.assemble(model.mesh, case.materials.to_fe(), order=case.mesh.order, long_axis=model.frame.up)
-    patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
-    fs = fe.factorize(system, fe.clamp(system, model.clamps))
-    fields = fs.bc.expand(fs.factor.solve(patch.patterns[fs.bc.free]))
+    inputs = loading.hole_inputs(case.materials.to_fe(), case.mesh.order, case.clamps.length_mm)
+    fs = global_model.factorize()
+    fields = fs.bc.expand(fs.factor.solve(global_model.patch.patterns[fs.bc.free]))
     print(f"{case.name}: global model {system.n_dofs:,} DOFs ({model.stats['n_tets']:,} tets), "
           f"{time.perf_counter() - start:.0f} s; cortex {model.site.cortical_thickness_mm:.2f} mm along the drill")
     base = case.loads.hole_options()
@@ -69,14 +70,13 @@ def main() -> None:
         raise SystemExit(f"--levels must include the case's refinement {own:.4g}")
     results = []
     for level in args.levels:
-        result = hole_stresses(case, model, system, fields, loading, dataclasses.replace(base, refinement=level))
+        result = hole_stresses(inputs, model, system, fields, dataclasses.replace(base, refinement=level))
         results.append(result)
         stations = "; ".join(f"tip {s.tip_depth_mm:.2f} mm: {s.dofs:,} DOFs, {s.seconds:.1f} s" for s in result.stations)
         print(f"refinement {level:.4g} (wall elements {result.wall_element_mm:.3g} mm): {stations}", flush=True)
     # placement noise: the case's level once more, turned by half a hole-circle step about the axis
     step = 180.0 / Resolution(refinement=own).scaled["n_wall"]
-    turned = hole_stresses(case, model, system, fields, loading,
-                           dataclasses.replace(base, refinement=own, rotation_deg=step))
+    turned = hole_stresses(inputs, model, system, fields, dataclasses.replace(base, refinement=own, rotation_deg=step))
     reference = results[args.levels.index(own)]
     print(f"placement noise: refinement {own:.4g} turned by {step:.3g} degrees")
     h = [r.wall_element_mm for r in results]

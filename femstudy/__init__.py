@@ -7,6 +7,8 @@ The public API (each returns a documented result object; docs/examples/ uses the
 
     case = femstudy.load_case("cases/middiaphysis.toml")
     result = femstudy.run_study(case, "results/mid")           # StudyResult
+    model = femstudy.prepare(case)                             # GlobalModel: the femur meshed and assembled
+    loading = femstudy.case_loading(case, model.femur.site.cortical_thickness_mm)   # CaseLoading
     sweep = femstudy.sweep("cases/middiaphysis.toml", [16, 12, 8])   # SweepResult
     cal = femstudy.calibrate(["demo/calibration"], name="mybone")    # CalibrationResult
     d = femstudy.diagnose(recording, simulation)                # Diagnosis
@@ -24,7 +26,9 @@ __version__ = "0.1.0"
 #: public name → module that defines it
 _API = {
     "load_case": "femstudy.casefile", "parse_case": "femstudy.casefile", "Case": "femstudy.casefile",
-    "run_study": "femstudy.study.run", "StudyResult": "femstudy.study.run",
+    "run_study": "femstudy.study.run", "StudyResult": "femstudy.study.study_result",
+    "prepare": "femstudy.study.global_model", "GlobalModel": "femstudy.study.global_model",
+    "case_loading": "femstudy.study.loading", "CaseLoading": "femstudy.study.loading",
     "run_cases": "femstudy.study.study",
     "mesh_case": "femstudy.study.femur", "femur_model": "femstudy.study.femur",
     "write_femur": "femstudy.meshing.builtin_femur", "FemurParameters": "femstudy.meshing.builtin_femur",

@@ -1,4 +1,5 @@
-"""Lanes of work: functions run in forked processes while the caller goes on.
+"""Lanes of work: functions run in forked processes while the caller goes on (an executor,
+:mod:`femstudy.execution`, that the command line gives a study).
 
 Most of a study after its global solves is single-threaded Python and NumPy (the hole models,
 the modal and resolved analyses, the figures and field files), so on a machine with two or
@@ -36,17 +37,11 @@ def cores() -> int:
 
 
 def can_fork() -> bool:
-    """Whether lanes fork here: on Linux with ≥ 2 cores, not from a daemonic process (a
-    process-pool worker may not have children), and not while a pyvista plotter is open in
-    this process (a notebook's plot: a child must not inherit its render window's GL context)."""
+    """Whether lanes fork here: on Linux with ≥ 2 cores, and not from a daemonic process (a
+    process-pool worker may not have children). A process with an open render window (a
+    notebook's pyvista plot) should not fork: give its study the default executor instead."""
     return (sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
-            and cores() >= 2 and not multiprocessing.current_process().daemon and not _plotters_open())
-
-
-def _plotters_open() -> bool:
-    """Whether pyvista holds open plotters here (its registry of the plotters not yet closed)."""
-    plotter = sys.modules.get("pyvista.plotting.plotter")
-    return bool(plotter is not None and getattr(plotter, "_ALL_PLOTTERS", None))
+            and cores() >= 2 and not multiprocessing.current_process().daemon)
 
 
 class ChildTraceback(Exception):
@@ -124,8 +119,8 @@ class Lane:
 class Lanes:
     """A block whose :meth:`start` runs functions beside the caller (see the module).
 
-    Example
-    -------
+    Examples
+    --------
     >>> with Lanes() as lanes:
     ...     there = lanes.start("answer", lambda: 6 * 7)
     ...     here = sum(range(10))
@@ -140,6 +135,7 @@ class Lanes:
         self._limits = None
 
     def __enter__(self) -> "Lanes":
+        self._lanes = []  # a block may be entered again (one study after another)
         if self.forking:
             from threadpoolctl import threadpool_limits
 
@@ -158,6 +154,7 @@ class Lanes:
                 stack.callback(self._limits.restore_original_limits)
             for lane in self._lanes:
                 stack.callback(lane.close)
+        self._limits = None
 
 
 def _child(fn: Callable, send, threads: int, parent: int) -> None:

@@ -12,8 +12,9 @@ from threadpoolctl import threadpool_info
 from femstudy.errors import UserError
 from femstudy.lanes import Lanes, can_fork, cores
 
+
 def forks_here() -> bool:
-    """What lanes do here apart from open plotters: fork on Linux with two or more cores."""
+    """What lanes do here: fork on Linux with two or more cores."""
     return sys.platform.startswith("linux") and cores() >= 2
 
 
@@ -121,15 +122,13 @@ def test_a_process_pool_worker_runs_its_lanes_itself():
         assert pool.map(_lane_in_a_pool_worker, [0]) == [(False, 42)]
 
 
-def test_an_open_plotter_keeps_lanes_in_the_caller():
-    import pyvista as pv
-
-    plotter = pv.Plotter(off_screen=True)
-    try:
-        assert not can_fork()
-    finally:
-        plotter.close()
-    assert can_fork() == forks_here()
+def test_a_block_can_be_entered_again():
+    """One Lanes object serves one study after another (the command line's several cases)."""
+    lanes = Lanes()
+    for k in range(2):
+        with lanes:
+            assert lanes.start("answer", lambda: 40 + k).result() == 40 + k
+        assert lanes._limits is None
 
 
 @forking

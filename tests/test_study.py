@@ -46,7 +46,10 @@ def run(tmp_path, mesh_cache, order=2, scale=1.0, step=0.5, screenshot="true", n
     case = parse_case(CASE.format(order=order, scale=scale, step=step, screenshot=screenshot, fields=fields,
                                   resolved=resolved, application=application))
     out = tmp_path / name
-    result = run_study(case, out, cache_dir=mesh_cache, keep_solutions=keep_solutions, parallel=parallel)
+    from femstudy.lanes import Lanes
+
+    result = run_study(case, out, cache_dir=mesh_cache, keep_solutions=keep_solutions,
+                       executor=Lanes() if parallel else None)
     return result.to_json(), out
 
 
@@ -268,11 +271,12 @@ def test_picture_without_fields_and_report_lists_what_exists(tmp_path, mesh_cach
 
 
 def test_a_study_in_one_process_writes_what_a_study_in_lanes_writes(tmp_path, mesh_cache):
-    """parallel=False (--serial) and the default lanes: the same files and the same numbers
-    (to round-off); without a results folder nothing is written and no files lane starts."""
+    """The default executor (one process, --serial) and the command line's lanes: the same files
+    and the same numbers (to round-off); without a results folder nothing is written and no
+    files part starts."""
     from femstudy.lanes import can_fork
 
-    forks = can_fork()  # before the serial run renders its picture here (then lanes no longer fork)
+    forks = can_fork()
     lanes, out_lanes = run(tmp_path, mesh_cache, order=1, step=1.0, name="lanes")
     serial, out_serial = run(tmp_path, mesh_cache, order=1, step=1.0, name="serial", parallel=False)
     assert (lanes["timings"]["parallel"], serial["timings"]["parallel"]) == (forks, False)
@@ -289,7 +293,7 @@ def test_a_study_in_one_process_writes_what_a_study_in_lanes_writes(tmp_path, me
                                   application="surface_patch"))
     before = set(tmp_path.iterdir())
     result = run_study(case, None, cache_dir=mesh_cache)
-    assert result.out_dir is None and result.summary["timings"]["files_s"] is None
+    assert result.out_dir is None and result.timings.files_s is None and result.figures is None
     assert set(tmp_path.iterdir()) == before
 
 
@@ -298,17 +302,15 @@ def test_the_reduced_march_gives_the_maxima_of_plain_stepping(tmp_path, mesh_cac
     (Ritz vectors of K_ff) and plain stepping with K-hat factorised (how the transient was
     computed before) give the same maxima to 1e-6."""
     from femstudy import fe
-    from femstudy.study.femur import femur_model
+    from femstudy.casefile import with_overrides
+    from femstudy.study.global_model import prepare
     from femstudy.study.loading import case_loading
-    from femstudy.study.run import study_channels
 
-    case = parse_case((REPO / "cases" / "middiaphysis.toml").read_text()).model_copy()
-    model = femur_model(case, mesh_cache, 16.0)
-    loading = case_loading(case, model.site.cortical_thickness_mm)
-    system = fe.assemble(model.mesh, case.materials.to_fe(), order=2, long_axis=model.frame.up)
-    patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
-    fs = fe.factorize(system, fe.clamp(system, model.clamps))
-    channels = study_channels(system, patch, model, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
+    case = with_overrides(parse_case((REPO / "cases" / "middiaphysis.toml").read_text()), {"mesh.size_mm": 16.0})
+    model = prepare(case, mesh_cache)
+    loading = case_loading(case, model.femur.site.cortical_thickness_mm)
+    patch, channels = model.patch, model.channels
+    fs = model.factorize()
     amplitudes = np.column_stack([loading.dynamic.thrust_N, loading.dynamic.torque_Nmm])
     peaks = {}
     for scheme in ("auto", "stepping"):

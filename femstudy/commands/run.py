@@ -30,12 +30,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from femstudy.lanes import Lanes
     from femstudy.study.study import run_cases
 
     s = args.settings
     results, table = run_cases(args.cases, out=args.out, study_out=args.study_out, mesh_size_mm=args.mesh_size,
                                cache_dir=s.cache_dir, solver=s.solver, bones_dir=s.bones_dir,
-                               bone=args.bone, force=args.force, keep_solutions=args.keep_solutions, parallel=args.parallel)
+                               bone=args.bone, force=args.force, keep_solutions=args.keep_solutions,
+                               executor=Lanes() if args.parallel else None)
     for r in results:
         d, st = r.dynamic.peaks, r.static.peaks
         if r.hole is not None:

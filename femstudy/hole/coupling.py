@@ -58,8 +58,8 @@ def cut_boundary(global_system, fields: np.ndarray, local_system, station, toler
     -------
     CutBoundary
 
-    Example
-    -------
+    Examples
+    --------
     >>> cut = cut_boundary(system, unit_fields, local, station)        # doctest: +SKIP
     >>> u = factorize_prescribed(local, cut.dofs).solve(cut.values)  # doctest: +SKIP
     """

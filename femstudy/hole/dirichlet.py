@@ -33,8 +33,8 @@ def facet_indices(system, faces: np.ndarray) -> np.ndarray:
     -------
     (k,) indices into ``system.mesh.facets``
 
-    Example
-    -------
+    Examples
+    --------
     >>> facet_indices(system, station.faces["hole_wall"])  # doctest: +SKIP
     """
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -111,8 +111,8 @@ def factorize_prescribed(system, dofs: np.ndarray, solver: str = "auto", keep: P
     -------
     PrescribedSystem
 
-    Example
-    -------
+    Examples
+    --------
     >>> ps = factorize_prescribed(system, cut_dofs)                # doctest: +SKIP
     >>> u = ps.solve(exact(system.nodes).ravel()[ps.dofs], loads)  # doctest: +SKIP
     """
@@ -141,8 +141,8 @@ def solve_prescribed(system, dofs: np.ndarray, values: np.ndarray, forces: np.nd
     -------
     (n_dofs,) or (n_dofs, k) displacement vector(s) [mm]
 
-    Example
-    -------
+    Examples
+    --------
     >>> u = solve_prescribed(system, dofs, exact(system.nodes).ravel()[dofs])  # doctest: +SKIP
     """
     dofs = np.asarray(dofs, dtype=np.int64).ravel()

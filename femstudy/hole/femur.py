@@ -151,8 +151,8 @@ def femur_columns(mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, dept
     -------
     :class:`FemurColumns` with ``top``, ``bottom`` and ``region`` for :func:`~femstudy.hole.mesh.hole_mesh`
 
-    Example
-    -------
+    Examples
+    --------
     >>> columns = femur_columns(model.mesh, outer, HoleFrame.along(site.entry_point, site.direction), 12.0)  # doctest: +SKIP
     >>> hole = hole_mesh(columns.frame, 2.7, 90.0, 8.0, tips, columns.top, columns.bottom, columns.region)  # doctest: +SKIP
     """
@@ -239,8 +239,8 @@ def smooth_columns(columns: FemurColumns, radius_mm: float, smoothing_mm: float 
     -------
     SmoothColumns
 
-    Example
-    -------
+    Examples
+    --------
     >>> smooth = smooth_columns(femur_columns(mesh, outer, frame, 12.0), 8.0)  # doctest: +SKIP
     >>> hole = hole_mesh(frame, 2.7, 90.0, 8.0, tips, smooth.top, smooth.bottom, smooth.region)  # doctest: +SKIP
     """

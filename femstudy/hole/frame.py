@@ -36,8 +36,8 @@ class HoleFrame:
         -------
         :class:`HoleFrame`
 
-        Example
-        -------
+        Examples
+        --------
         >>> f = HoleFrame.along([0, 0, 0], [0, 0, 2])
         >>> f.axis.tolist()
         [0.0, 0.0, 1.0]

@@ -100,8 +100,8 @@ def facet_quadrature(system, faces: np.ndarray, degree: int = QUADRATURE_DEGREE)
     -------
     :class:`FacetQuadrature`
 
-    Example
-    -------
+    Examples
+    --------
     >>> q = facet_quadrature(system, station.faces["hole_bottom"])  # doctest: +SKIP
     >>> f = q.forces(np.broadcast_to(-1.0 * q.normal[:, None], q.x.shape))  # 1 MPa pressure  # doctest: +SKIP
     """
@@ -176,8 +176,8 @@ def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_
     -------
     :class:`HoleLoads`
 
-    Example
-    -------
+    Examples
+    --------
     >>> loads = hole_loads(system, hole.at_station(3), growth_exponent=0.47)  # doctest: +SKIP
     >>> f = loads.force(cutting_thrust_N=20.0, cutting_torque_Nmm=15.0)  # doctest: +SKIP
     """

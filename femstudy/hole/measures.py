@@ -158,8 +158,8 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     -------
     list of :class:`HoleMeasure`, loadings fastest
 
-    Example
-    -------
+    Examples
+    --------
     >>> distance_measures(system, station, u, (0.5, 1.0), model.frame.up)  # doctest: +SKIP
     """
     from femstudy.hole.probe import MeshLocator, point_probe
@@ -194,8 +194,8 @@ def exclusion_measures(system, station, u: np.ndarray, radii_mm, long_axis, excl
     -------
     list of :class:`HoleMeasure`, loadings fastest
 
-    Example
-    -------
+    Examples
+    --------
     >>> exclusion_measures(system, station, u, (1.0, 2.0), axis, np.zeros((system.n_tets, 4), bool))  # doctest: +SKIP
     """
     u = np.asarray(u, float).reshape(system.n_dofs, -1)

@@ -208,8 +208,8 @@ class HoleMesh:
         -------
         :class:`HoleStation`
 
-        Example
-        -------
+        Examples
+        --------
         >>> station = hole.at_station(0)  # doctest: +SKIP
         >>> station.faces["hole_bottom"].shape  # doctest: +SKIP
         (96, 3)
@@ -380,8 +380,8 @@ def hole_mesh(frame: HoleFrame, diameter_mm: float, point_angle_deg: float, subm
     -------
     :class:`HoleMesh`
 
-    Example
-    -------
+    Examples
+    --------
     >>> plate = hole_mesh(HoleFrame.along([0, 0, 0], [0, 0, 1]), 2.7, 90.0, 6.0, [2.0, 3.0],
     ...                   top=lambda xy: np.zeros(len(xy)),
     ...                   bottom=lambda xy: (np.full(len(xy), 2.5), np.ones(len(xy), bool)))

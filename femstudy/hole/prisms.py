@@ -38,8 +38,8 @@ def split_prisms(prisms: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     tets : (k, 4) vertex indices, unoriented, without tetrahedra that repeat a vertex
     owner : (k,) the prism of every tetrahedron
 
-    Example
-    -------
+    Examples
+    --------
     >>> tets, owner = split_prisms(np.array([[0, 1, 2, 3, 4, 5]]))
     >>> tets.tolist()
     [[0, 1, 2, 5], [0, 1, 5, 4], [0, 4, 5, 3]]

@@ -164,8 +164,8 @@ def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,
     -------
     :class:`PointProbe`
 
-    Example
-    -------
+    Examples
+    --------
     >>> p = point_probe(system, np.array([[1.0, 2.0, 0.5]]))  # doctest: +SKIP
     >>> p.stress(u)[0]  # σxx, σyy, σzz, σyz, σxz, σxy [MPa]  # doctest: +SKIP
     """

@@ -42,8 +42,8 @@ def graded_points(fixed: np.ndarray, size) -> np.ndarray:
     -------
     (m,) sorted positions, ``fixed`` among them.
 
-    Example
-    -------
+    Examples
+    --------
     >>> graded_points(np.array([0.0, 1.0]), lambda s: np.full_like(s, 0.25))
     array([0.  , 0.25, 0.5 , 0.75, 1.  ])
     """
@@ -149,8 +149,8 @@ def disk(hole_radius_mm: float, outer_radius_mm: float, n_wall: int, wall_mm: fl
     -------
     :class:`Disk`
 
-    Example
-    -------
+    Examples
+    --------
     >>> d = disk(1.35, 8.0, 32, 0.2, 1.25)
     >>> bool(np.isclose(d.ring_radii[d.hole_ring], 1.35))
     True

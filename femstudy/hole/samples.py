@@ -160,8 +160,8 @@ def offset_samples(station, distance_mm: float, spacing_mm: float | None = None)
     -------
     :class:`OffsetSamples`
 
-    Example
-    -------
+    Examples
+    --------
     >>> samples = offset_samples(hole.at_station(2), 1.0)  # doctest: +SKIP
     >>> stress = point_probe(system, samples.points).stress(u)  # doctest: +SKIP
     """
@@ -206,8 +206,8 @@ def hole_distance(station, points: np.ndarray) -> np.ndarray:
     -------
     (n,) distances [mm]
 
-    Example
-    -------
+    Examples
+    --------
     >>> far = hole_distance(station, quadrature_points) > 2.0  # doctest: +SKIP
     """
     require(station.index >= 0, "the distance from the hole needs a drilled station (index ≥ 0)")

@@ -1,5 +1,9 @@
 """Stresses near the drilled hole of a femur: the global model drives local hole models.
 
+Its inputs are plain values (:class:`HoleInputs`: drill, materials, element order, clamped
+length, the loads at each tip depth), the meshed femur and the global system; it knows
+nothing of case files or studies.
+
 One-way submodelling (docs/hole.md). The global femur model (no hole) is solved for a unit
 thrust and a unit torque on its surface patch; its displacement under the loading at a
 station's tip depth is Σ amplitude × unit field. At each of a few depth stations the local
@@ -8,9 +12,10 @@ depth) takes those displacements on its cut faces (:mod:`femstudy.hole.coupling`
 drill's loads on its hole — cutting thrust and torque on the cone, the chip-evacuation torque
 as wall friction and its thrust on the bottom (:mod:`femstudy.hole.loads`) — with the same
 resultants as the patch. Each station costs one assembly and one factorisation; its loadings
-(dynamic: the clogging model at that depth; static: Allotta's full-engagement load, all of it
-cutting) are two right-hand sides. The measures (:mod:`femstudy.hole.measures`) are taken at
-stated distances from the hole wall and outside exclusion radii. Units: mm, N, N·mm, MPa, s.
+(dynamic: the study's load model at that depth, :class:`StationLoad`; static: Allotta's
+full-engagement load, all of it cutting) are two right-hand sides. The measures
+(:mod:`femstudy.hole.measures`) are taken at stated distances from the hole wall and outside
+exclusion radii. Units: mm, N, N·mm, MPa, s.
 """
 
 from __future__ import annotations
@@ -19,11 +24,13 @@ import logging
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
-from femstudy.drilling import allotta, evaluate
+from femstudy.drilling.drill import Drill
 from femstudy.errors import UserError, require
+from femstudy.materials import BoneMaterials
 from femstudy.hole.coupling import cut_boundary
 from femstudy.hole.dirichlet import factorize_prescribed
 from femstudy.hole.femur import femur_columns, smooth_columns
@@ -75,6 +82,44 @@ class HoleOptions:
     cut_margin_mm: float = 2.0
     smoothing_mm: float = 1.0
     rotation_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class StationLoad:
+    """The dynamic loading when the drill tip is at one depth: time [s] and the amplitudes of its
+    cutting part (thrust [N], torque [N·mm] on the cone) and chip-evacuation part (thrust on the
+    bottom, torque as wall friction) (:func:`femstudy.drilling.load_parts`)."""
+
+    time_s: float
+    cutting_thrust_N: float
+    cutting_torque_Nmm: float
+    evacuation_thrust_N: float
+    evacuation_torque_Nmm: float
+
+
+@dataclass(frozen=True)
+class HoleInputs:
+    """What the hole models take from a study, as plain values.
+
+    drill : the drill (diameter and point angle make the hole)
+    materials : the regions' materials
+    order : element order of the local models (1 or 2)
+    clamp_length_mm : length clamped at each end of the femur, along its long axis (the
+        exclusion measures leave it out)
+    drilled_depth_mm : the hole's depth (the deepest station's tip, short of the ligament)
+    station_load : tip depth [mm] → :class:`StationLoad` of the dynamic loading
+    static_load : (thrust [N], torque [N·mm]) of the static loading, all of it cutting
+    growth_exponent : p of the chip pressure along the engaged wall (:func:`femstudy.hole.loads.hole_loads`)
+    """
+
+    drill: Drill
+    materials: BoneMaterials
+    order: int
+    clamp_length_mm: float
+    drilled_depth_mm: float
+    station_load: Callable[[float], StationLoad]
+    static_load: tuple[float, float]
+    growth_exponent: float
 
 
 @dataclass(frozen=True)
@@ -190,21 +235,6 @@ class HoleResult:
                                       "static": self.headline("static").row()}})
 
 
-def station_amplitudes(cond, tip_depth_mm: float, scale: float = 1.0) -> tuple[float, float, float, float, float]:
-    """(time [s], cutting thrust [N], cutting torque [N·mm], evacuation thrust [N], evacuation
-    torque [N·mm]) of the dynamic ("clogging") loading when the tip is at ``tip_depth_mm``:
-    cutting = Allotta's thrust and torque of the engaged cone, evacuation = the clogging
-    model's total minus the cutting part (femstudy.drilling.history)."""
-    t = tip_depth_mm / cond.feed_mm_s
-    total = evaluate("clogging", cond, np.array([t]))
-    a, h, drill, bone = cond.feed_per_rev_mm, cond.cortex_mm, cond.drill, cond.bone
-    d = np.array([tip_depth_mm])
-    F_cut = float(allotta.thrust(d, a, h, bone.u1_MPa, bone.u2_MPa, drill)[0])
-    T_cut = float(allotta.torque(d, a, h, bone.u1_MPa, bone.u2_MPa, drill)[0])
-    F, T = float(total.thrust_N[0]), float(total.torque_Nmm[0])
-    return t, scale * F_cut, scale * T_cut, scale * (F - F_cut), scale * (T - T_cut)
-
-
 def station_tips(options: HoleOptions, drilled_depth_mm: float, cortex_mm: float) -> np.ndarray:
     """Tip depths [mm] of the stations: k/n of the deepest tip, min(drilled depth, cortex −
     ligament) (:class:`HoleOptions`; ``cortex_mm`` the bottom's depth on the axis, inf where
@@ -215,44 +245,47 @@ def station_tips(options: HoleOptions, drilled_depth_mm: float, cortex_mm: float
     return deepest * np.arange(1, options.stations + 1) / options.stations
 
 
-def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options: HoleOptions = HoleOptions(),
+def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, options: HoleOptions = HoleOptions(),
                   solver: str = "auto", keep: Path | None = None) -> HoleResult:
     """Stresses near the drilled hole at a few depth stations, driven by the global model.
 
     Parameters
     ----------
-    case : :class:`femstudy.casefile.Case` (drill, materials, clamps)
-    model : :class:`femstudy.meshing.FemurModel` the global femur (no hole)
-    system : :class:`femstudy.fe.FESystem` assembled on ``model.mesh``
-    unit_fields : (n_dofs, 2) global displacements [mm] under a unit patch thrust [1 N] and torque [1 N·mm]
-    loading : :class:`femstudy.study.loading.CaseLoading` (conditions, static load)
-    options : :class:`HoleOptions`
-    solver : linear solver of the local models
-    keep : folder of kept solutions for the local models (:func:`femstudy.fe.factorize`), optional
+    inputs : HoleInputs
+        Drill, materials, element order, clamped length, depth and the loads at each tip depth.
+    femur : :class:`femstudy.meshing.FemurModel`
+        The global femur (no hole): its mesh, frame and drill site.
+    system : :class:`femstudy.fe.FESystem`
+        Assembled on ``femur.mesh``.
+    unit_fields : (n_dofs, 2) ndarray
+        Global displacements [mm] under a unit patch thrust [1 N] and torque [1 N·mm].
+    options : HoleOptions
+    solver : str
+        Linear solver of the local models.
+    keep : Path, optional
+        Folder of kept solutions for the local models (:func:`femstudy.fe.factorize`).
 
     Returns
     -------
     HoleResult
 
-    Example
-    -------
-    >>> fields = fs.bc.expand(fs.factor.solve(patch.patterns[fs.bc.free]))           # doctest: +SKIP
-    >>> result = hole_stresses(case, model, system, fields, case_loading(case, 6.0))  # doctest: +SKIP
-    >>> result.headline().von_mises_MPa                                               # doctest: +SKIP
+    Examples
+    --------
+    >>> fields = fs.bc.expand(fs.factor.solve(patch.patterns[fs.bc.free]))   # doctest: +SKIP
+    >>> result = hole_stresses(inputs, femur, system, fields)                 # doctest: +SKIP
+    >>> result.headline().von_mises_MPa                                       # doctest: +SKIP
     """
     from femstudy.fe import assemble
     from femstudy.meshing.landmarks import outer_faces
 
     require(options.stations >= 1, f"the hole needs at least one station, got {options.stations}")
-    cond = loading.conditions
-    scale = case.drilling.load_scale
     start = time.perf_counter()
-    frame = HoleFrame.along(model.site.entry_point, model.site.direction)
+    frame = HoleFrame.along(femur.site.entry_point, femur.site.direction)
     if options.rotation_deg:
         c, s = np.cos(np.radians(options.rotation_deg)), np.sin(np.radians(options.rotation_deg))
         frame = HoleFrame(frame.origin, frame.axis, c * frame.e1 + s * frame.e2, c * frame.e2 - s * frame.e1)
-    columns = femur_columns(model.mesh, outer_faces(model.mesh, model.frame), frame, options.depth_cap_mm)
-    radius = fitting_radius(columns, options.submodel_radius_mm, case.drill.diameter_mm / 2 + options.cut_margin_mm + 1.0)
+    columns = femur_columns(femur.mesh, outer_faces(femur.mesh, femur.frame), frame, options.depth_cap_mm)
+    radius = fitting_radius(columns, options.submodel_radius_mm, inputs.drill.radius_mm + options.cut_margin_mm + 1.0)
     if radius < options.submodel_radius_mm:
         log.warning("hole model: radius %.1f mm instead of %.1f mm, the largest that stays on the bone around the "
                     "hole; measures farther from the hole than it allows are missing", radius, options.submodel_radius_mm)
@@ -261,33 +294,33 @@ def hole_stresses(case, model, system, unit_fields: np.ndarray, loading, options
         columns = smooth_columns(columns, options.submodel_radius_mm, options.smoothing_mm)
     axis_bottom, axis_free = columns.bottom(np.zeros((1, 2)))
     axis_bottom = float(axis_bottom[0]) if axis_free[0] else np.inf
-    tips = station_tips(options, loading.depth_mm, axis_bottom)
-    hole = hole_mesh(frame, case.drill.diameter_mm, case.drill.point_angle_deg, options.submodel_radius_mm, tips,
+    tips = station_tips(options, inputs.drilled_depth_mm, axis_bottom)
+    hole = hole_mesh(frame, inputs.drill.diameter_mm, inputs.drill.point_angle_deg, options.submodel_radius_mm, tips,
                      columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement),
                      columns.interface)
     mesh_seconds = time.perf_counter() - start
     log.info("hole model: %d stations (tips %s mm), column mesh %.1f s", len(tips),
              ", ".join(f"{t:.2f}" for t in tips), mesh_seconds)
-    materials = case.materials.to_fe()
-    up = np.asarray(model.frame.up, float)
-    heights = model.mesh.points @ up
-    clamp = case.clamps.length_mm
-    static = (float(loading.static_thrust_N), float(loading.static_torque_Nmm))
+    up = np.asarray(femur.frame.up, float)
+    heights = femur.mesh.points @ up
+    static = tuple(float(x) for x in inputs.static_load)
     runs, measures = [], []
     global_locator = MeshLocator(system)  # every station's cut nodes are found in the one femur mesh
     for k, tip in enumerate(tips):
         start = time.perf_counter()
         station = hole.at_station(k)
-        local = assemble(station.mesh, materials, order=case.mesh.order, long_axis=up)
-        t, F_cut, T_cut, F_evac, T_evac = station_amplitudes(cond, float(tip), scale)
+        local = assemble(station.mesh, inputs.materials, order=inputs.order, long_axis=up)
+        load = inputs.station_load(float(tip))
+        t, F_cut, T_cut, F_evac, T_evac = (load.time_s, load.cutting_thrust_N, load.cutting_torque_Nmm,
+                                           load.evacuation_thrust_N, load.evacuation_torque_Nmm)
         cut = cut_boundary(system, unit_fields, local, station, locator=global_locator)
-        patterns = hole_loads(local, station, growth_exponent=cond.growth_exponent)
+        patterns = hole_loads(local, station, growth_exponent=inputs.growth_exponent)
         unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
         loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order
                              [*static, *static, 0.0, 0.0]]).T  # (patch thrust, torque, 4 hole loads) × 2 loadings
         u = unit @ loadings
         measures += distance_measures(local, station, u, options.distances_mm, up, LOADINGS)
-        excluded = _excluded(local, cut.dofs, heights, up, clamp, options.cut_margin_mm)
+        excluded = _excluded(local, cut.dofs, heights, up, inputs.clamp_length_mm, options.cut_margin_mm)
         measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, up, excluded, LOADINGS)
         seconds = time.perf_counter() - start
         runs.append(StationRun(k, float(tip), t, F_cut, T_cut, F_evac, T_evac, local.n_dofs, len(cut.dofs), seconds,

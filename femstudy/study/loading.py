@@ -1,8 +1,9 @@
 """Load histories of a study case: the dynamic (cutting + chip evacuation) and the static
 Allotta loading, sampled on the case's time grid (thesis §5.9), and the resolved history.
 
-Dynamic: model "clogging" of :mod:`femstudy.drilling.history` at the case's feed, speed,
-drill and bone set, with the hole's cortex equal to the drilled depth. Static: Allotta's
+Dynamic: the case's load model (``drilling.model``, "clogging" by default: cutting + chip
+evacuation; :mod:`femstudy.drilling.registry`) at its feed, speed, drill and bone set, with the
+hole's cortex equal to the drilled depth. Static: Allotta's
 full-engagement thrust and torque, constant in time (the thesis's comparison load).
 Resolved: the dynamic loading with its per-flute oscillation and breakthrough release, on a
 grid that resolves both (:func:`resolved_loading`). Units: s, N, N·mm.
@@ -17,18 +18,29 @@ import numpy as np
 
 from femstudy.casefile import Case
 from femstudy.drilling import (Drill, DrillingConditions, DynamicContent, LoadHistory, evaluate, load_bone_set,
-                               time_grid)
+                               load_parts, registry, time_grid)
+from femstudy.hole.study import HoleInputs, StationLoad
 
 
 @dataclass(frozen=True)
 class CaseLoading:
-    """Both loadings on one time grid, and what they were computed from."""
+    """Both loadings on one time grid, and what they were computed from.
+
+    conditions : the operating point (feed, speed, drilled depth as the cortex, bone set, drill)
+    model : the dynamic loading's load model (:mod:`femstudy.drilling.registry`)
+    depth_mm : the drilled depth [mm]
+    scale : ``drilling.load_scale``, already applied to every load here
+    dynamic : the dynamic loading on the case's time grid
+    static_thrust_N, static_torque_Nmm : Allotta's full-engagement load
+    """
 
     conditions: DrillingConditions
     depth_mm: float
     dynamic: LoadHistory
     static_thrust_N: float
     static_torque_Nmm: float
+    model: str = "clogging"
+    scale: float = 1.0
 
     @property
     def times_s(self) -> np.ndarray:
@@ -39,6 +51,26 @@ class CaseLoading:
         t = self.times_s
         return LoadHistory("static allotta", t, self.dynamic.depth_mm,
                            np.full_like(t, self.static_thrust_N), np.full_like(t, self.static_torque_Nmm))
+
+    @property
+    def title(self) -> str:
+        """The dynamic loading's load model, as its legend reads."""
+        return registry.get(self.model).title
+
+    def station(self, tip_depth_mm: float) -> StationLoad:
+        """The dynamic loading's cutting and chip-evacuation parts when the tip is at
+        ``tip_depth_mm`` (time = depth / feed), scaled like the loading."""
+        t = tip_depth_mm / self.conditions.feed_mm_s
+        parts = load_parts(self.model, self.conditions, np.array([t]))
+        k = self.scale
+        return StationLoad(t, k * float(parts.cutting_thrust_N[0]), k * float(parts.cutting_torque_Nmm[0]),
+                           k * float(parts.evacuation_thrust_N[0]), k * float(parts.evacuation_torque_Nmm[0]))
+
+    def hole_inputs(self, materials, order: int, clamp_length_mm: float) -> HoleInputs:
+        """The hole models' inputs (:class:`femstudy.hole.study.HoleInputs`) for this loading."""
+        return HoleInputs(self.conditions.drill, materials, order, clamp_length_mm, self.depth_mm, self.station,
+                          (float(self.static_thrust_N), float(self.static_torque_Nmm)),
+                          self.conditions.growth_exponent)
 
 
 def drilled_depth_mm(case: Case, cortical_thickness_mm: float) -> float:
@@ -62,9 +94,9 @@ def case_loading(case: Case, cortical_thickness_mm: float, bones_dir: Path | Non
     times = time_grid(cond, case.time.step_s, end_s=case.time.end_s)
     thrust, torque = cond.static_allotta()
     k = case.drilling.load_scale
-    dynamic = evaluate("clogging", cond, times)
+    dynamic = evaluate(case.drilling.model, cond, times)
     dynamic = replace(dynamic, thrust_N=k * dynamic.thrust_N, torque_Nmm=k * dynamic.torque_Nmm)
-    return CaseLoading(cond, depth, dynamic, k * thrust, k * torque)
+    return CaseLoading(cond, depth, dynamic, k * thrust, k * torque, case.drilling.model, k)
 
 
 def dynamic_content(case: Case, cond: DrillingConditions) -> DynamicContent:
@@ -85,6 +117,6 @@ def resolved_loading(case: Case, loading: CaseLoading, dt_s: float) -> LoadHisto
     start = max(0.0, breakthrough - case.analysis.resolved_lead_s)
     end = breakthrough + content.release_s + 0.1
     times = start + np.arange(int(np.floor((end - start) / dt_s + 1e-9)) + 1) * dt_s
-    history = evaluate("clogging", cond, times, content)
-    k = case.drilling.load_scale
+    history = evaluate(loading.model, cond, times, content)
+    k = loading.scale
     return replace(history, thrust_N=k * history.thrust_N, torque_Nmm=k * history.torque_Nmm)

@@ -23,7 +23,7 @@ def write_study(folder: Path, summaries: list[dict]) -> Path:
 def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path = Path("results/study"), *,
               mesh_size_mm: float | None = None, cache_dir: Path = DEFAULT_CACHE_DIR, solver: str = "auto",
               bones_dir: Path | None = None, bone: str | None = None, force: bool = False,
-              keep_solutions: bool = True, parallel: bool = True) -> tuple[list, Path | None]:
+              keep_solutions: bool = True, executor=None) -> tuple[list, Path | None]:
     """Run the study of every case file into results/<case name> (or ``out`` for one case);
     with several cases also the combined table in ``study_out``.
 
@@ -36,7 +36,7 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
         Results folder of a single case.
     study_out : Path
         Folder of the combined table (several cases).
-    mesh_size_mm, cache_dir, solver, bones_dir, force, keep_solutions, parallel
+    mesh_size_mm, cache_dir, solver, bones_dir, force, keep_solutions, executor
         As for :func:`femstudy.run_study`.
     bone : str, optional
         Replaces every case's ``drilling.bone`` (e.g. "bovine" to repeat a human-femur study
@@ -67,7 +67,7 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
     if len(cases) > 1:
         require_writable_parent(study_out)
     results = [run_study(case, target, mesh_size_mm=mesh_size_mm, cache_dir=cache_dir, solver=solver,
-                         bones_dir=bones_dir, force=force, keep_solutions=keep_solutions, parallel=parallel)
+                         bones_dir=bones_dir, force=force, keep_solutions=keep_solutions, executor=executor)
                for case, target in zip(cases, targets)]
     table = write_study(study_out, [r.to_json() for r in results]) if len(results) > 1 else None
     return results, table

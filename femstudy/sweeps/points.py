@@ -49,11 +49,10 @@ def evaluate(point: Point, context: Context) -> dict:
     return study_point(case, Path(context.runs_folder) / point.id, context)
 
 
-def peak_load(case, cortical_thickness_mm: float) -> tuple[float, float, float]:
-    """(time [s], thrust [N], torque [N·mm]) of the dynamic load at its peak thrust."""
-    from femstudy.study.loading import case_loading
-
-    dyn = case_loading(case, cortical_thickness_mm).dynamic
+def peak_load(loading) -> tuple[float, float, float]:
+    """(time [s], thrust [N], torque [N·mm]) of the dynamic load (of a
+    :class:`~femstudy.study.loading.CaseLoading`) at its peak thrust."""
+    dyn = loading.dynamic
     k = int(np.argmax(dyn.thrust_N))
     return float(dyn.time_s[k]), float(dyn.thrust_N[k]), float(dyn.torque_Nmm[k])
 
@@ -61,25 +60,24 @@ def peak_load(case, cortical_thickness_mm: float) -> tuple[float, float, float]:
 def mesh_point(case, cache_dir: Path, solver: str = "auto") -> dict:
     """Mesh, assemble and solve statically under the peak dynamic load."""
     from femstudy import fe
-    from femstudy.study.femur import femur_model
-    from femstudy.study.run import study_channels
+    from femstudy.study.global_model import prepare
+    from femstudy.study.loading import case_loading
 
     start = time.perf_counter()
-    model = femur_model(case, cache_dir)
-    meshed = time.perf_counter()
-    t_peak, thrust, torque = peak_load(case, model.site.cortical_thickness_mm)
-    system = fe.assemble(model.mesh, case.materials.to_fe(), order=case.mesh.order, long_axis=model.frame.up)
-    patch = fe.drill_patch(system, model.site, radius_mm=case.drill.diameter_mm / 2)
-    fs = fe.factorize(system, fe.clamp(system, model.clamps), solver)
+    model = prepare(case, cache_dir)
+    meshed = start + model.mesh_s
+    femur, system, patch = model.femur, model.system, model.patch
+    loading = case_loading(case, femur.site.cortical_thickness_mm)
+    t_peak, thrust, torque = peak_load(loading)
+    fs = model.factorize(solver)
     assembled = time.perf_counter()
     u = fe.solve_static(fs, patch.force(thrust, torque))
     solved = time.perf_counter()
-    recorder = fe.StepRecorder(study_channels(system, patch, model, case.analysis.exclusion_radius_mm,
-                                              case.clamps.length_mm), 1)
+    recorder = fe.StepRecorder(model.channels, 1)
     recorder.step(0, u)
     r = recorder.history()
-    volume = float(model.stats["tet_volume_mm3"])
-    hole = hole_quantities(case, model, system, fs, patch, solver) if case.loads.application == "hole" else {}
+    volume = float(femur.stats["tet_volume_mm3"])
+    hole = hole_quantities(model, fs, loading, solver) if case.loads.application == "hole" else {}
     return {**hole,
         "size_mm": case.mesh.size_mm, "order": case.mesh.order, "refine": case.mesh.refine,
         "site_size_mm": case.mesh.site_size_mm if case.mesh.refine == "site" else None,
@@ -89,23 +87,24 @@ def mesh_point(case, cache_dir: Path, solver: str = "auto") -> dict:
         "load_time_s": t_peak, "thrust_N": thrust, "torque_Nmm": torque,
         "max_deflection_mm": r["deflection"].peak, "drill_point_deflection_mm": r["drill_point"].peak,
         "max_von_mises_MPa": r["von_mises"].peak, "max_von_mises_excl_MPa": r["von_mises/outside"].peak,
-        "mesh_s": meshed - start, "tetwild_s": model.stats.get("tetwild_seconds"),
-        "mesh_cache_hit": bool(model.stats.get("cache_hit")),
+        "mesh_s": meshed - start, "tetwild_s": femur.stats.get("tetwild_seconds"),
+        "mesh_cache_hit": bool(femur.stats.get("cache_hit")),
         "assembly_s": assembled - meshed, "solve_s": solved - assembled, "solver": fs.method,
     }
 
 
-def hole_quantities(case, model, system, fs, patch, solver: str = "auto") -> dict:
+def hole_quantities(model, fs, loading, solver: str = "auto") -> dict:
     """The hole model's element size, largest dynamic von Mises stresses at each distance from
-    the hole wall and beyond the quoted exclusion radius (femstudy.hole.study), and its time."""
+    the hole wall and beyond the quoted exclusion radius (femstudy.hole.study), and its time;
+    ``model`` a :class:`~femstudy.study.global_model.GlobalModel`, ``fs`` its factorisation."""
     from femstudy.hole.study import hole_stresses
-    from femstudy.study.loading import case_loading
 
+    case = model.case
     start = time.perf_counter()
-    fields = fs.bc.expand(fs.factor.solve(patch.patterns[fs.bc.free]))
+    fields = fs.bc.expand(fs.factor.solve(model.patch.patterns[fs.bc.free]))
     options = case.loads.hole_options()
-    hole = hole_stresses(case, model, system, fields, case_loading(case, model.site.cortical_thickness_mm), options,
-                         solver)
+    inputs = loading.hole_inputs(case.materials.to_fe(), case.mesh.order, case.clamps.length_mm)
+    hole = hole_stresses(inputs, model.femur, model.system, fields, options, solver)
     out = {"hole_h_mm": hole.wall_element_mm, "hole_s": time.perf_counter() - start,
            "hole_von_mises_excl_MPa": hole.worst("exclusion", options.exclusion_radius_mm).von_mises_MPa}
     for distance in options.distances_mm:
@@ -117,19 +116,18 @@ def study_point(case, folder: Path, context: Context) -> dict:
     """The full study of one case into ``folder``; the headline numbers."""
     from femstudy.study.run import run_study
 
-    # a sweep runs its points side by side (processes, Dask workers): a point forks no lanes of its own
+    # a sweep runs its points side by side (processes, Dask workers): a point runs its parts in its own process
     result = run_study(case, folder, cache_dir=Path(context.cache_dir), solver=context.solver,
-                       bones_dir=context.bones_dir and Path(context.bones_dir), parallel=False)
-    summary = result.to_json()
-    res = summary["results"]
-    out = {"results_folder": str(folder), "dofs": summary["solver"]["dofs"],
-           "mu_f": summary["loading"]["mu_f"], "mu_w": summary["loading"]["mu_w"],
-           "peak_thrust_N": summary["loading"]["peak_thrust_N"], "peak_torque_Nmm": summary["loading"]["peak_torque_Nmm"],
-           "total_s": summary["timings"]["total_s"]}
+                       bones_dir=context.bones_dir and Path(context.bones_dir))
+    mu_f, mu_w = result.loading.conditions.friction
+    dyn = result.loading.dynamic
+    out = {"results_folder": str(folder), "dofs": result.solver.dofs, "mu_f": mu_f, "mu_w": mu_w,
+           "peak_thrust_N": float(dyn.thrust_N.max()), "peak_torque_Nmm": float(dyn.torque_Nmm.max()),
+           "total_s": result.timings.total_s}
     for quantity in ("max_deflection_mm", "max_von_mises_MPa", "max_von_mises_excl_MPa"):
-        out[f"{quantity}_dynamic"] = res[quantity]["dynamic"]["value"]
-        out[f"{quantity}_static"] = res[quantity]["static"]["value"]
-        out[f"{quantity}_ratio"] = res[quantity]["ratio_dynamic_to_static"]
+        d, s = result.peak(quantity).value, result.peak(quantity, "static").value
+        out[f"{quantity}_dynamic"], out[f"{quantity}_static"] = d, s
+        out[f"{quantity}_ratio"] = d / s if s > 0 else None
     return out
 
 

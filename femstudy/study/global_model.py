@@ -1,0 +1,101 @@
+"""The first stage of every study, sweep point and benchmark: a case's femur meshed, assembled
+and ready to load (:func:`prepare` → :class:`GlobalModel`).
+
+The model is the femur's tet mesh (cached, :mod:`femstudy.meshing`) with the case's materials
+assembled into K and M (:func:`femstudy.fe.assemble`), the drill's surface patch at the site
+(its unit thrust and torque patterns, :func:`femstudy.fe.drill_patch`), the clamps at both
+ends, and the output channels every analysis reads (deflection, drill point, von Mises with
+masks away from the drill and the clamps, per region). Units: mm, N, N·mm, MPa, s.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from femstudy import fe
+from femstudy.casefile import Case
+from femstudy.femur_mesh import REGION_NAMES
+from femstudy.meshing import FemurModel
+from femstudy.meshing.cache import DEFAULT_CACHE_DIR
+from femstudy.study.femur import femur_model
+
+
+@dataclass(frozen=True, eq=False)
+class GlobalModel:
+    """A case's femur, assembled and ready to load.
+
+    case : the case it was built from
+    femur : the meshed femur (mesh, clamps, drill site, frame, quality, statistics)
+    system : K and M assembled on the femur's mesh
+    patch : the drill's surface patch (unit thrust and torque patterns)
+    channels : output channels (:func:`study_channels`)
+    mesh_s, assembly_s : wall times of meshing (or reading the cache) and of assembly [s]
+    """
+
+    case: Case
+    femur: FemurModel
+    system: fe.FESystem
+    patch: fe.DrillPatch
+    channels: tuple
+    mesh_s: float
+    assembly_s: float
+
+    def factorize(self, solver: str = "auto", keep: str | PathLike | None = None) -> fe.FactorizedSystem:
+        """K_ff under the femur's clamps, factorised (or served by solutions kept in ``keep``,
+        :mod:`femstudy.fe.kept`)."""
+        return fe.factorize(self.system, fe.clamp(self.system, self.femur.clamps), solver,
+                            keep=None if keep is None else Path(keep))
+
+
+def study_channels(system, patch, femur, exclusion_radius_mm: float, clamp_length_mm: float) -> tuple:
+    """The output points of a study: every node's |u|, the drill point's mean displacement,
+    and every stress point's von Mises stress, with masks for the points more than the
+    exclusion radius from the drill point and from the clamped ends, and per region."""
+    from femstudy.fe.post import quadrature_points
+
+    points = quadrature_points(system)
+    nq = points.shape[1]
+    points = points.reshape(-1, 3)
+    heights = points @ femur.frame.up
+    nodes_up = system.nodes @ femur.frame.up
+    margin = clamp_length_mm + exclusion_radius_mm
+    away = ((np.linalg.norm(points - patch.centre, axis=1) > exclusion_radius_mm)
+            & (heights < nodes_up.max() - margin) & (heights > nodes_up.min() + margin))
+    masks = {"outside": away}
+    for code, name in REGION_NAMES.items():
+        masks[name] = np.repeat(system.region == code, nq)
+    return (fe.deflection_channel(system), fe.point_channel("drill_point", patch.mean, patch.centre),
+            fe.von_mises_channel(system, masks))
+
+
+def prepare(case: Case, cache_dir: str | PathLike = DEFAULT_CACHE_DIR) -> GlobalModel:
+    """Mesh (or read from the cache) and assemble the femur of ``case``.
+
+    Parameters
+    ----------
+    case : Case
+    cache_dir : str or PathLike
+        Mesh cache folder.
+
+    Returns
+    -------
+    GlobalModel
+
+    Examples
+    --------
+    >>> model = prepare(load_case("cases/middiaphysis.toml"))        # doctest: +SKIP
+    >>> model.system.n_dofs                                           # doctest: +SKIP
+    181911
+    """
+    start = time.perf_counter()
+    femur = femur_model(case, Path(cache_dir))
+    meshed = time.perf_counter()
+    system = fe.assemble(femur.mesh, case.materials.to_fe(), order=case.mesh.order, long_axis=femur.frame.up)
+    patch = fe.drill_patch(system, femur.site, radius_mm=case.drill.diameter_mm / 2)
+    channels = study_channels(system, patch, femur, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
+    return GlobalModel(case, femur, system, patch, channels, meshed - start, time.perf_counter() - meshed)
