@@ -101,8 +101,8 @@ class Diagnosis:
         """Write the JSON contract, the overlay/residual figure and the report folder (report.md,
         overlay.png, residuals.png, diagnosis.json), each atomically; returns what was written.
 
-        Example
-        -------
+        Examples
+        --------
         >>> d.write(json_path="d.json", report_dir="report")  # doctest: +SKIP
         [PosixPath('d.json'), PosixPath('report/report.md')]
         """
@@ -279,8 +279,8 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
     -------
     Diagnosis
 
-    Example
-    -------
+    Examples
+    --------
     >>> d = diagnose("rec.csv", "sim.csv")                           # doctest: +SKIP
     >>> d.to_json()["missing_physics"], d.to_json()["unexplained"]   # doctest: +SKIP
     """

@@ -42,8 +42,8 @@ def held_out_predictions(problem: Problem, fit: Fit, window: np.ndarray, fits_of
     numpy.ndarray, channels × instants: the held-out prediction in the window, the full
     fit's model elsewhere.
 
-    Example
-    -------
+    Examples
+    --------
     >>> pred = held_out_predictions(problem, fit, window)  # doctest: +SKIP
     """
     names = problem.nonlinear_names(fit.subset, fit.variant)

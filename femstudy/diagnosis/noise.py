@@ -137,8 +137,8 @@ def fit_spectrum(series: list[np.ndarray], step_s: float, pre_sigma_s: float, so
     -------
     NoiseSpectrum
 
-    Example
-    -------
+    Examples
+    --------
     >>> rng = np.random.default_rng(0)
     >>> fit_spectrum([rng.normal(size=4000)], 0.01, 1e-4, "white").exponent >= 0.3
     True

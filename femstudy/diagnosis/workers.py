@@ -51,8 +51,8 @@ class PoolFitter:
 def fitter(workers: int = 1):
     """The fitter for ``workers`` processes (serial for 1, or where processes cannot be forked).
 
-    Example
-    -------
+    Examples
+    --------
     >>> with fitter(2) as fits_of:                                   # doctest: +SKIP
     ...     fit, = fits_of([(problem, frozenset(), [start], {})])
     """

@@ -201,7 +201,7 @@ def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int =
     >>> from femstudy.fe.geometry import tube_mesh
     >>> system = assemble(tube_mesh(100.0, 14.0, 6.5, 1, 12, 10), order=1)
     >>> system.n_dofs
-    720
+    792
     """
     materials = BoneMaterials() if materials is None else materials
     t0 = time.perf_counter()

@@ -88,8 +88,8 @@ def describe_end(centres: np.ndarray, normals: np.ndarray, areas: np.ndarray, ax
     -------
     EndShape
 
-    Example
-    -------
+    Examples
+    --------
     >>> from femstudy.meshing.builtin_femur import BUILTIN_STL
     >>> from femstudy.meshing.surface import read_surface, surface_samples
     >>> s = read_surface(BUILTIN_STL)
@@ -125,8 +125,8 @@ def proximal_end(plus: EndShape, minus: EndShape) -> str:
     Raises :class:`~femstudy.errors.UserError` with both ends' measurements when the
     head and the condyles disagree or neither decides.
 
-    Example
-    -------
+    Examples
+    --------
     >>> from femstudy.meshing.spheres import SphereFit
     >>> cap = lambda r, c: SphereFit(np.zeros(3), r, 0.3, c)
     >>> proximal_end(EndShape("+", cap(22, 0.3), cap(21, 0.28), False, True),

@@ -136,8 +136,8 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
     -------
     (Frame, points in mm)
 
-    Example
-    -------
+    Examples
+    --------
     >>> from femstudy.casefile import GeometrySpec
     >>> from femstudy.meshing.builtin_femur import BUILTIN_STL
     >>> from femstudy.meshing.surface import read_surface

@@ -46,8 +46,8 @@ def fit_sphere(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[n
 
     Solves |x|² = 2 c·x + k in the least-squares sense (k = r² − |c|²).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> u = np.random.default_rng(0).normal(size=(200, 3))
     >>> centre, radius = fit_sphere(5 + 2 * u / np.linalg.norm(u, axis=1, keepdims=True))
@@ -88,8 +88,8 @@ def find_sphere(centres: np.ndarray, normals: np.ndarray, areas: np.ndarray, rad
     SphereFit or None
         None when no seed keeps at least 20 samples inside ``radius_range``.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import pyvista as pv
     >>> s = pv.Sphere(radius=20, center=(1, 2, 3), theta_resolution=60, phi_resolution=60)
     >>> s = s.compute_cell_sizes().compute_normals(cell_normals=True, point_normals=False)

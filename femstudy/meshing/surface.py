@@ -69,8 +69,8 @@ def surface_samples(points: np.ndarray, triangles: np.ndarray, per_extent: int =
     -------
     centres (k, 3), normals (k, 3), areas (k,)
 
-    Example
-    -------
+    Examples
+    --------
     >>> import pyvista as pv
     >>> box = pv.Box().triangulate()
     >>> x, n, a = surface_samples(np.asarray(box.points), box.regular_faces)
@@ -103,8 +103,8 @@ def file_digest(path: Path) -> str:
 def check_surface_file(path: Path) -> None:
     """Raise :class:`UserError` unless ``path`` is a readable, non-empty file of a known format.
 
-    Example
-    -------
+    Examples
+    --------
     >>> check_surface_file(Path("/"))
     Traceback (most recent call last):
     femstudy.errors.UserError: / is a folder, not a surface file
@@ -233,8 +233,8 @@ def read_surface(path: str | Path, bodies: str = "one") -> Surface:
     -------
     Surface
 
-    Example
-    -------
+    Examples
+    --------
     >>> from femstudy.meshing.builtin_femur import BUILTIN_STL
     >>> len(read_surface(BUILTIN_STL).triangles)
     12000
