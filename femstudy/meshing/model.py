@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from dataclasses import dataclass, field
@@ -118,24 +119,25 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
     digest = file_digest(path)
     key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size)})
     start = time.perf_counter()
-    hit = cache.load(key, cache_dir)
-    if hit is None:
-        # two stages, cached apart: the TetWild mesh (shared by every drill site) and its
-        # refinement around this site
-        base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size, with_site=False)})
-        base = cache.load(base_key, cache_dir) if base_key != key else None
-        if base is None:
-            log.info("meshing %s at %g mm (not cached)", path.name, size)
-            base = _build(spec, path, size)
-            if base_key != key:
-                cache.store(base_key, *base, root=cache_dir)
+    with cache.lock(key, cache_dir):  # a second process asking for this mesh waits, then loads it
+        hit = cache.load(key, cache_dir)
+        if hit is None:
+            # two stages, cached apart: the TetWild mesh (shared by every drill site) and its
+            # refinement around this site
+            base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size, with_site=False)})
+            with cache.lock(base_key, cache_dir) if base_key != key else contextlib.nullcontext():
+                base = cache.load(base_key, cache_dir) if base_key != key else None
+                if base is None:
+                    log.info("meshing %s at %g mm (not cached)", path.name, size)
+                    base = _build(spec, path, size)
+                    if base_key != key:
+                        base = cache.store(base_key, *base, root=cache_dir)
+                else:
+                    log.info("loaded the cached TetWild mesh %s; refining it at the drill site", base_key[:12])
+            arrays, meta = cache.store(key, *_finish(spec, size, *base), root=cache_dir)
         else:
-            log.info("loaded the cached TetWild mesh %s; refining it at the drill site", base_key[:12])
-        arrays, meta = _finish(spec, size, *base)
-        cache.store(key, arrays, meta, root=cache_dir)
-    else:
-        log.info("loaded cached mesh %s (%s)", key[:12], cache_dir)
-        arrays, meta = hit
+            log.info("loaded cached mesh %s (%s)", key[:12], cache_dir)
+            arrays, meta = hit
     mesh = TetMesh(arrays["points"], arrays["tets"].astype(np.int64), arrays["region"].astype(np.int8))
     frame = Frame.from_dict(meta["frame"])
     outer = landmarks.outer_faces(mesh, frame)

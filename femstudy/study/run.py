@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from femstudy import __version__, atomic, fe
-from femstudy.casefile import Case
+from femstudy.casefile import Case, with_overrides
 from femstudy.femur_model import REGION_NAMES
 from femstudy.hole import verdicts
 from femstudy.hole.study import hole_stresses
@@ -42,7 +42,7 @@ from femstudy.lanes import Lanes
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.fe.linsolve import available_memory_bytes
 from femstudy.meshing.model import surface_file
-from femstudy.study import feasibility, output
+from femstudy.study import feasibility, output, plausibility
 from femstudy.study.femur import femur_model, femur_spec
 from femstudy.study.loading import CaseLoading, case_loading, resolved_loading
 from femstudy.study.results import LoadingResult, comparison
@@ -200,7 +200,8 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
         Folder of calibrated bone sets named by ``case.drilling.bone``.
     force : bool
         Run even when the study is estimated to take very long (one that cannot fit in
-        memory is refused regardless).
+        memory is refused regardless), or when an input or a result fails a plausibility gate
+        (:mod:`femstudy.study.plausibility`): then it is marked out of range.
     keep_solutions : bool
         Serve the solves from the solutions an earlier run kept for the same stiffness matrices
         and keep this run's (:mod:`femstudy.fe.kept`): a repeated study, or one that changes only
@@ -223,14 +224,16 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     >>> result.peak("max_deflection_mm").value                              # doctest: +SKIP
     0.0539
     """
-    if mesh_size_mm is not None:  # so that summary.json echoes the size actually used
-        case = case.model_copy(update={"mesh": case.mesh.model_copy(update={"size_mm": float(mesh_size_mm)})})
+    if mesh_size_mm is not None:  # validated, and so that summary.json echoes the size actually used
+        case = with_overrides(case, {"mesh.size_mm": mesh_size_mm})
     clock = {"start": time.perf_counter()}
     feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force)
+    out_of_range = plausibility.check_inputs(case, bones_dir, force)
     record_path = case.convergence_path()
     record = None if record_path is None else verdicts.read_record(record_path)  # a bad record fails now
     log.info("case '%s': building or loading the femur mesh", case.name)
     model = femur_model(case, cache_dir)
+    out_of_range += plausibility.check_site(case, model, force)
     clock["mesh"] = time.perf_counter()
 
     loading = case_loading(case, model.site.cortical_thickness_mm, bones_dir)
@@ -289,6 +292,7 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
                                                                             summary["hole"]["convergence"])
         summary["timings"].update(hole_s=hole_lane and hole_lane.seconds, files_s=files_lane and files_lane.seconds,
                                   waited_for_lanes_s=clock["lanes"] - clock["resolved"], parallel=lanes.forking)
+        summary["out_of_range"] = out_of_range + plausibility.check_results(summary, model.frame.length_mm, force)
         summary["timings"]["total_s"] = time.perf_counter() - clock["start"]  # before writing the summary
         result = StudyResult(case, step.dynamic, step.static, dynamics, loading, summary, out_dir, hole)
         if folder is not None:
