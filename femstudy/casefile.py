@@ -46,6 +46,8 @@ Vector3 = Annotated[tuple[float, float, float], BeforeValidator(_three_numbers)]
 ANATOMICAL_DIRECTIONS = ("anterior", "posterior", "lateral", "medial")
 #: A twist drill advances at most this far per turn [mm/rev] (surgical drilling: 0.01-0.2).
 MAX_FEED_PER_REV_MM = 1.0
+#: Largest TetWild target edge [mm] (:class:`MeshSpec`).
+MAX_MESH_SIZE_MM = 64.0
 #: A case file is a short text: larger files are refused before they are read.
 MAX_CASE_BYTES = 1 << 20
 
@@ -97,13 +99,14 @@ class GeometrySpec(_Section):
 
 
 class MeshSpec(_Section):
-    """TetWild target edge lengths [mm] and element order. A global size beyond 100 mm has
-    no element across the shaft; a site size below 0.05 mm is finer than bone's
-    microstructure, where a continuum model no longer holds."""
+    """TetWild target edge lengths [mm] and element order. A global size beyond 64 mm, more
+    than twice a femoral shaft's width, describes no bone (and TetWild then runs for minutes:
+    more than 300 s at 500 mm against 34 s at 64 mm, docs/checks.md); a site size below
+    0.05 mm is finer than bone's microstructure, where a continuum model no longer holds."""
 
-    size_mm: float = Field(8.0, gt=0, le=100)
+    size_mm: float = Field(8.0, gt=0, le=MAX_MESH_SIZE_MM)
     refine: Literal["site", "uniform"] = "site"
-    site_size_mm: float = Field(1.0, ge=0.05, le=100)
+    site_size_mm: float = Field(1.0, ge=0.05, le=MAX_MESH_SIZE_MM)
     site_radius_mm: float = Field(12.0, gt=0, le=200)
     envelope: float = Field(1e-3, gt=0, le=0.05)
     order: Literal[1, 2] = 2

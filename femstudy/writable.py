@@ -89,6 +89,26 @@ def check_output_folder(target: str | os.PathLike, what: str = "results", *, inp
     require_writable_parent(target, what)
 
 
+def claim_folder(target: str | os.PathLike, what: str, *, inputs: Iterable = (),
+                 cache_dir: str | os.PathLike | None = None) -> Path:
+    """Make ``target`` a folder femstudy adds files to over several runs (a sweep, which
+    resumes): absent or empty (then marked as femstudy's), or already marked; anything else is
+    refused as by :func:`check_output_folder`. Returns the folder."""
+    from femstudy.atomic import MARKER
+
+    target = Path(target)
+    if (target / MARKER).is_file():
+        return target
+    check_output_folder(target, what, inputs=inputs, cache_dir=cache_dir)
+    if target.exists() and any(target.iterdir()):
+        raise UserError(f"cannot write {what} to {target}: the folder exists and femstudy did not write it (it has no "
+                        f"{MARKER}); name a new folder")
+    target.mkdir(parents=True, exist_ok=True)
+    (target / MARKER).write_text(json.dumps({"written_by": "femstudy", "complete": False, "files": []}) + "\n",
+                                 encoding="utf-8")
+    return target
+
+
 def check_output_file(target: str | os.PathLike, what: str, *, inputs: Iterable = ()) -> None:
     """Raise :class:`UserError`, before any work, unless the file ``target`` can be written:
     not a folder, not one of ``inputs``, in a writable place."""

@@ -33,6 +33,7 @@ before the first one starts: this estimate and the inputs' plausibility
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from dataclasses import dataclass
@@ -52,6 +53,9 @@ BYTES_PER_STEP = 8 * 200
 #: (Table 3-1), from which :func:`estimate` scales a bone's.
 REFERENCE_LOWEST_HZ, REFERENCE_LENGTH_MM = 560.0, 455.6
 RESOLVED_SECONDS_PER_STEP = 3e-4
+#: Memory of meshing per final tetrahedron [bytes]: TetWild's background mesh (about three
+#: tets per final one) and the refinement's arrays, generously.
+MESH_BYTES_PER_TET = 2000.0
 #: Hole-model P2 DOFs per station at refinement 1 and their growth exponent (docs/hole.md).
 HOLE_DOFS_AT_1, HOLE_DOFS_EXPONENT = 55_000.0, 3.2
 #: Above this estimated time a study needs ``force``.
@@ -147,7 +151,14 @@ def estimate(case, volume_mm3: float, mesh_size_mm: float | None = None,
 
 def surface_size(path: Path) -> tuple[float, float]:
     """The enclosed volume [mm³] and length [mm] of a surface file, its units guessed from its
-    extent like the meshing does (a file that is not a femur is refused here, in one line)."""
+    extent like the meshing does (a file that is not a femur is refused here, in one line).
+    Read once per file version: a sweep asks for every point."""
+    stat = Path(path).stat()
+    return _surface_size(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _surface_size(path: str, mtime_ns: int, size: int) -> tuple[float, float]:
     from femstudy.meshing.frame import detect_units
     from femstudy.meshing.surface import read_points
 
@@ -157,9 +168,18 @@ def surface_size(path: Path) -> tuple[float, float]:
     return abs(float(mesh.volume)) * scale ** 3, extent * scale
 
 
-def surface_volume_mm3(path: Path) -> float:
-    """The enclosed volume of a surface file [mm³] (:func:`surface_size`)."""
-    return surface_size(path)[0]
+def check_meshing(case, surface: Path, available_bytes: float) -> Estimate:
+    """Refuse (:class:`UserError`) a mesh that cannot be built in ``available_bytes`` of memory
+    (:data:`MESH_BYTES_PER_TET`), as ``femstudy mesh`` builds it without solving."""
+    volume, length = surface_size(surface)
+    e = estimate(case, volume, length_mm=length)
+    budget = MEMORY_SHARE * available_bytes
+    if e.tets * MESH_BYTES_PER_TET > budget:
+        site = case.mesh.site_size_mm if case.mesh.refine == "site" else case.mesh.size_mm
+        raise UserError(f"mesh.size_mm = {case.mesh.size_mm:g} mm (site {site:g} mm) would make about {e.tets:.2g} "
+                        f"tetrahedra, needing about {e.tets * MESH_BYTES_PER_TET / 1e9:.3g} GB to build against "
+                        f"{budget / 1e9:.3g} GB usable here; use larger sizes")
+    return e
 
 
 def check(case, surface: Path, available_bytes: float, mesh_size_mm: float | None = None,

@@ -74,19 +74,20 @@ def friction_findings(drilling, bone_set) -> list[Finding]:
     f, n = float(drilling.feed_mm_s), float(drilling.spindle_rpm)
     if bone_set.in_calibrated_range(f, n):
         return []
-    findings = []
+    findings = []  # (how far beyond, finding): the worse coefficient first
     for name, given, value, calibrated in zip(("mu_f", "mu_w"), (drilling.mu_f, drilling.mu_w),
                                               bone_set.friction(f, n), (bone_set.mu_f, bone_set.mu_w)):
         low, high = min(calibrated) / FRICTION_FACTOR, max(calibrated) * FRICTION_FACTOR
         if given is not None or (math.isfinite(value) and low <= value <= high):
             continue
-        findings.append(Finding("friction extrapolated", (
+        beyond = max(value / high, low / value) if math.isfinite(value) and value > 0 else math.inf
+        findings.append((beyond, Finding("friction extrapolated", (
             f"drilling.feed_mm_s = {f:g} mm/s at spindle_rpm = {n:g} lies outside the conditions bone set "
             f"'{bone_set.name}' was calibrated on ({min(bone_set.feed_mm_s):g}-{max(bone_set.feed_mm_s):g} mm/s, "
             f"{min(bone_set.spindle_rpm):g}-{max(bone_set.spindle_rpm):g} rpm), and its power law gives {name} = "
             f"{value:.3g} there, beyond {low:.3g}-{high:.3g} (half the smallest to twice the largest calibrated "
-            f"value); give drilling.{name}, or a bone set calibrated there")))
-    return findings
+            f"value); give drilling.{name}, or a bone set calibrated there"))))
+    return [finding for _, finding in sorted(findings, key=lambda pair: -pair[0])]
 
 
 def input_findings(case, bones_dir: Path | None = None) -> list[Finding]:
@@ -155,8 +156,8 @@ def result_findings(summary: dict, length_mm: float) -> list[Finding]:
 
     for part in ("results", "dynamics", "hole", "margins"):
         for path, value in _numbers(summary.get(part) or {}):
-            where = " ".join(p for p in path if not p.isdigit() and p not in ("value",)).replace("_", " ")
             deflection = next((key for key in _DEFLECTIONS if key in path), None)
+            where = " ".join(p for p in path if not p.isdigit() and p not in ("value", deflection)).replace("_", " ")
             stress = any("von_mises" in p or p.endswith("stress_MPa") for p in path)
             if path[-1] == "strength_ratio":
                 if math.isnan(value):
@@ -170,12 +171,13 @@ def result_findings(summary: dict, length_mm: float) -> list[Finding]:
                     beyond("not a number", math.inf, f"{where} is {value}: the solution failed")
                 elif deflection and abs(value) > limit_mm:
                     beyond("deflection beyond the bone", abs(value) / limit_mm, (
-                        f"{_WORDS[deflection]} {value:.3g} mm ({where}) is beyond {100 * DEFLECTION_SHARE:g} % of the "
+                        f"{_WORDS[deflection]} {value:.3g} mm{f' ({where})' if where else ''} is beyond "
+                        f"{100 * DEFLECTION_SHARE:g} % of the "
                         f"{length_mm:.0f} mm bone ({limit_mm:.3g} mm), where the small-displacement model no longer "
                         "holds"))
                 elif stress and abs(value) > limit_MPa:
                     beyond("stress beyond bone strength", abs(value) / limit_MPa, (
-                        f"{where} {value:.3g} MPa is more than {STRESS_FACTOR:g} times bone's ultimate strength "
+                        f"{where.replace(' MPa', '').replace('von mises', 'von Mises')} {value:.3g} MPa is more than {STRESS_FACTOR:g} times bone's ultimate strength "
                         f"({BONE_STRENGTH_MPA:g} MPa)"))
     return [Finding(check, message) for check, (_, message) in worst.items()]
 
@@ -191,8 +193,13 @@ def enforce(findings: list[Finding], force: bool, advice: str = "") -> list[dict
         raise UserError(f"{findings[0].message}{more}{f'; {advice}' if advice else ''}; --force runs it anyway and "
                         "marks the results out of range")
     for finding in findings:
-        log.warning("out of range (--force): %s", finding.message)
+        if finding not in _warned:  # a run of several cases judges each case's inputs twice
+            _warned.add(finding)
+            log.warning("out of range (--force): %s", finding.message)
     return [f.as_dict() for f in findings]
+
+
+_warned: set[Finding] = set()
 
 
 def check_inputs(case, bones_dir: Path | None, force: bool) -> list[dict]:

@@ -22,18 +22,55 @@ from femstudy.recordings.units import is_units_row
 ZIP_SIGNATURE = b"PK\x03\x04"
 DATA_SHEETS = ("recording", "data")
 METADATA_SHEET = "metadata"
+#: Rows and columns read from a sheet at most: a recording's samples (femstudy's limit,
+#: femstudy.recordings.reader.MAX_SAMPLES) plus a header, and far more columns than channels.
+MAX_ROWS = 25_000_000 + 1000
+MAX_COLUMNS = 256
+#: Largest uncompressed content of a workbook [bytes] (1 GiB, the limit on a recording file).
+MAX_UNCOMPRESSED_BYTES = 1 << 30
+
+
+def _check_archive(path: Path, source: str) -> None:
+    """Refuse a workbook whose parts would unpack to more than :data:`MAX_UNCOMPRESSED_BYTES`
+    (a zip bomb), before openpyxl unpacks anything."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as book:
+            size = sum(info.file_size for info in book.infolist())
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({type(exc).__name__}: "
+                        f"{exc})") from None
+    if size > MAX_UNCOMPRESSED_BYTES:
+        raise UserError(f"recording {source} unpacks to {size / 2 ** 30:.1f} GiB; femstudy reads workbooks of up to "
+                        f"{MAX_UNCOMPRESSED_BYTES / 2 ** 30:.0f} GiB unpacked: export the recording as CSV and split it")
+
+
+def _sheet_rows(ws, source: str) -> list[list]:
+    """The rows of a read-only sheet as they are in the file. The sheet's ``dimension`` claim
+    is dropped first: openpyxl pads every row to the claimed width and height, and a 1.5 kB
+    file claiming a million rows by 16,384 columns would fill memory."""
+    ws.reset_dimensions()
+    rows = []
+    for row in ws.iter_rows(values_only=True):
+        if len(rows) >= MAX_ROWS:
+            raise UserError(f"recording {source}: sheet '{ws.title}' has more than {MAX_ROWS:,} rows; femstudy reads "
+                            "recordings of up to 25 million samples: split it")
+        rows.append(list(row[:MAX_COLUMNS]))
+    return rows
 
 
 def read_table(path: Path, source: str) -> Table:
     """An .xlsx recording as a :class:`Table` (see the module docstring)."""
     import openpyxl
 
+    _check_archive(path, source)
     try:
         with path.open("rb") as stream:  # a stream, so that openpyxl does not insist on the suffix
             book = openpyxl.load_workbook(stream, read_only=True, data_only=True)
-            sheets = {ws.title: [list(row) for row in ws.iter_rows(values_only=True)] for ws in book.worksheets}
+            sheets = {ws.title: _sheet_rows(ws, source) for ws in book.worksheets}
             book.close()
-    except OSError:
+    except (OSError, UserError):
         raise
     except Exception as exc:  # openpyxl raises BadZipFile, KeyError, InvalidFileException ... on a damaged file
         raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({type(exc).__name__}: "
