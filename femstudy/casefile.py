@@ -26,8 +26,6 @@ from femstudy.materials import BoneMaterials, IsotropicMaterial
 from femstudy.schema import describe, key_line, parse_toml
 
 PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-#: A length on a femur [mm]: positive and at most a metre.
-FemurMM = Annotated[float, Field(gt=0, le=1000, allow_inf_nan=False)]
 
 
 def _three_numbers(value):
@@ -166,7 +164,7 @@ class MaterialsSpec(_Section):
 class ClampSpec(_Section):
     """Surface nodes within ``length_mm`` of each end, along the long axis, are fixed."""
 
-    length_mm: FemurMM = 20.0
+    length_mm: float = Field(20.0, ge=1, le=1000)
 
 
 class SiteSpec(_Section):
@@ -196,12 +194,12 @@ class DrillingSpec(_Section):
     the chip-evacuation load is released at breakthrough ("flute": one flute passage); both
     enter the resolved transient only (docs/load-models.md)."""
 
-    feed_mm_s: float = Field(2.0, gt=0, le=50)
+    feed_mm_s: float = Field(2.0, ge=0.01, le=50)
     spindle_rpm: float = Field(1500.0, ge=10, le=100_000)
     bone: str = "human"
     mu_f: float | None = Field(None, gt=0, le=5)
     mu_w: float | None = Field(None, gt=0, le=10)
-    depth_mm: Union[Literal["cortex"], Annotated[float, Field(gt=0, le=100)]] = 6.0
+    depth_mm: Union[Literal["cortex"], Annotated[float, Field(ge=0.1, le=100)]] = 6.0
     load_scale: float = Field(1.0, ge=0, le=100)
     flute_oscillation: float = Field(0.1, ge=0, lt=1)
     breakthrough_release_s: Union[Literal["flute"], Annotated[float, Field(gt=0, le=10)]] = "flute"

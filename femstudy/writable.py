@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Iterable
@@ -145,3 +146,18 @@ def require_writable_parent(target: str | os.PathLike, what: str = "results", fo
             pass
     except OSError as exc:
         raise UserError(f"cannot write {what} to {target}: {exc.strerror or exc}") from None
+
+
+def require_free_space(target: str | os.PathLike, need_bytes: float, what: str = "results") -> None:
+    """Raise :class:`UserError` unless the disk that will hold ``target`` has ``need_bytes``
+    free (checked before the work, so that a full disk does not fail it half-way)."""
+    existing = Path(target)
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    try:
+        free = shutil.disk_usage(existing).free
+    except OSError:
+        return
+    if free < need_bytes:
+        raise UserError(f"cannot write {what} to {target}: {free / 1e6:.0f} MB free on its disk, and they need about "
+                        f"{need_bytes / 1e6:.0f} MB; free some space or write elsewhere")

@@ -8,11 +8,15 @@ from pathlib import Path
 from femstudy.commands.options import number
 
 
+#: Most samples of one model's history (a long cut at a fine --dt would fill memory).
+MAX_SAMPLES = 1_000_000
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("loads", help="thrust and torque histories of the drilling load models",
                        description="Evaluate the Allotta, chip-clogging, Chi and Peng models for "
                                    "one unicortical hole and print their key values.")
-    p.add_argument("--feed", type=number(0, 50, "mm/s"), required=True, metavar="MM_S", help="feed rate f [mm/s]")
+    p.add_argument("--feed", type=number(0.01, 50, "mm/s", low_open=False), required=True, metavar="MM_S", help="feed rate f [mm/s]")
     p.add_argument("--rpm", type=number(10, 100_000, "rpm", low_open=False), required=True, help="spindle speed N [rpm]")
     p.add_argument("--bone", default="bovine",
                    help="coefficient set: bovine, human, or a calibrated set name or .toml file")
@@ -31,8 +35,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from femstudy.drilling import Drill
     from femstudy.drilling.report import load_models
+    from femstudy.errors import require
     from femstudy.writable import check_output_file
+
+    cut_s = (args.cortex_mm + Drill(diameter_mm=args.diameter_mm, point_angle_deg=args.point_angle).cone_length_mm) \
+        / args.feed
+    require(cut_s / args.dt <= MAX_SAMPLES, f"--dt {args.dt:g} s over the {cut_s:.4g} s of the cut makes "
+                                            f"{cut_s / args.dt:,.0f} samples per model; at most {MAX_SAMPLES:,}: "
+                                            "use a longer --dt")
 
     for path, what in ((args.csv, "the histories"), (args.plot, "the figure")):
         if path is not None:

@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--out", type=Path, help="write one recording (format from --format, else the suffix)")
     where.add_argument("--dataset", type=Path, metavar="DIR", help="write a calibration data set "
                        "(Table 4-1 conditions x replicates, validation runs at Table 5-3 conditions)")
-    p.add_argument("--feed", type=number(0, 50, "mm/s"), default=1.5, metavar="MM_S", help="feed rate f [mm/s] (1.5)")
+    p.add_argument("--feed", type=number(0.01, 50, "mm/s", low_open=False), default=1.5, metavar="MM_S", help="feed rate f [mm/s] (1.5)")
     p.add_argument("--rpm", type=number(10, 100_000, "rpm", low_open=False), default=1500.0, help="spindle speed N [rpm] (1500)")
     p.add_argument("--cortex-mm", type=number(0, 20, "mm"), default=6.0, help="cortical thickness [mm] (6)")
     p.add_argument("--model", choices=("clogging", "allotta"), default="clogging", help="(clogging)")

@@ -13,7 +13,7 @@ damaged or edited entry (an anterior axis negated in its frame, say) is reported
 removed and rebuilt by the caller. Nothing in it is unpickled (``allow_pickle=False``).
 
 While an entry is built its key is locked (:func:`lock`: an advisory ``flock`` on
-``<root>/locks/<key>.lock``, released by the kernel if the process dies): a second process
+``<root>/.locks/<key>.lock``, released by the kernel if the process dies): a second process
 asking for the same mesh waits and then loads the first one's entry, instead of running
 TetWild again and storing another mesh under the same key (TetWild is not deterministic).
 """
@@ -64,7 +64,7 @@ def _canonical(meta: dict) -> bytes:
 def lock(key: str, root: Path = DEFAULT_CACHE_DIR) -> Iterator[None]:
     """Hold the build lock of entry ``key`` (see the module docstring); waits for a process
     that holds it, saying so."""
-    folder = Path(root) / "locks"
+    folder = Path(root) / ".locks"
     folder.mkdir(parents=True, exist_ok=True)
     with open(folder / f"{key}.lock", "a+b") as handle:
         try:

@@ -232,11 +232,11 @@ def check(case, surface: Path, available_bytes: float, mesh_size_mm: float | Non
 
 
 def preflight(case, cache_dir: Path, bones_dir: Path | None = None, force: bool = False,
-              available_bytes: float | None = None) -> Estimate:
+              available_bytes: float | None = None, forceable: bool = True) -> Estimate:
     """Everything about ``case`` that can be judged before any work: the estimate
     (:func:`check`) and the plausibility of its inputs
     (:func:`femstudy.study.plausibility.check_inputs`); a :class:`UserError` when either
-    refuses it."""
+    refuses it (offering ``--force`` where it applies, ``forceable``)."""
     from femstudy.fe.linsolve import available_memory_bytes
     from femstudy.meshing.model import surface_file
     from femstudy.study import plausibility
@@ -244,5 +244,5 @@ def preflight(case, cache_dir: Path, bones_dir: Path | None = None, force: bool 
 
     available = available_memory_bytes() if available_bytes is None else available_bytes
     e = check(case, surface_file(femur_spec(case), cache_dir), available, force=force)
-    plausibility.check_inputs(case, bones_dir, force)
+    plausibility.check_inputs(case, bones_dir, force, forceable)
     return e

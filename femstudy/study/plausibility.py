@@ -182,16 +182,17 @@ def result_findings(summary: dict, length_mm: float) -> list[Finding]:
     return [Finding(check, message) for check, (_, message) in worst.items()]
 
 
-def enforce(findings: list[Finding], force: bool, advice: str = "") -> list[dict]:
+def enforce(findings: list[Finding], force: bool, advice: str = "", forceable: bool = True) -> list[dict]:
     """Raise the first finding as a :class:`UserError` unless ``force``; with ``force`` log
-    each as a warning and return them as records for summary.json."""
+    each as a warning and return them as records for summary.json. ``forceable``: the
+    message offers ``--force`` (a sweep has none)."""
     if not findings:
         return []
     if not force:
         more = f" (and {len(findings) - 1} more out-of-range value{'s' * (len(findings) > 2)})" \
             if len(findings) > 1 else ""
-        raise UserError(f"{findings[0].message}{more}{f'; {advice}' if advice else ''}; --force runs it anyway and "
-                        "marks the results out of range")
+        offer = "; --force runs it anyway and marks the results out of range" if forceable else ""
+        raise UserError(f"{findings[0].message}{more}{f'; {advice}' if advice else ''}{offer}")
     for finding in findings:
         if finding not in _warned:  # a run of several cases judges each case's inputs twice
             _warned.add(finding)
@@ -202,9 +203,9 @@ def enforce(findings: list[Finding], force: bool, advice: str = "") -> list[dict
 _warned: set[Finding] = set()
 
 
-def check_inputs(case, bones_dir: Path | None, force: bool) -> list[dict]:
+def check_inputs(case, bones_dir: Path | None, force: bool, forceable: bool = True) -> list[dict]:
     """:func:`input_findings` enforced (see :func:`enforce`)."""
-    return enforce(input_findings(case, bones_dir), force)
+    return enforce(input_findings(case, bones_dir), force, forceable=forceable)
 
 
 def check_site(case, model, force: bool) -> list[dict]:

@@ -9,6 +9,10 @@ from femstudy import atomic
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.study.report import study_discussion, study_table
 
+#: Disk a case's results need, checked before it runs [bytes]: twice the 50 MB of the default
+#: case's folder (fields of 7 frames of a 60,000-node mesh), a tenth of that without fields.
+RESULTS_BYTES_WITH_FIELDS, RESULTS_BYTES = 100e6, 10e6
+
 
 def write_study(folder: Path, summaries: list[dict]) -> Path:
     """Write ``study.md`` (table beside Tables 5-14/5-15 plus discussion) and ``study.json``."""
@@ -56,7 +60,7 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
     from femstudy.study.femur import femur_spec
     from femstudy.study.feasibility import preflight
     from femstudy.study.run import run_study
-    from femstudy.writable import check_output_folder
+    from femstudy.writable import check_output_folder, require_free_space
 
     require(out is None or len(case_files) == 1, "--out names one results folder: give one case file")
     cases = [load_case(path, bones_dir) for path in case_files]
@@ -74,6 +78,7 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
         surface = femur_spec(case).surface
         check_output_folder(target, "results", inputs=[*case_files, *([surface] if surface else [])],
                             cache_dir=cache_dir)
+        require_free_space(target, RESULTS_BYTES_WITH_FIELDS if case.output.fields else RESULTS_BYTES)
     if len(cases) > 1:
         check_output_folder(study_out, "the combined table", inputs=case_files, cache_dir=cache_dir)
         require(Path(study_out).resolve() not in {Path(t).resolve() for t in targets},

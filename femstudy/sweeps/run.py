@@ -132,7 +132,8 @@ def _preflight(points, case, options: dict) -> None:
 
     for point in points:
         try:
-            preflight(with_overrides(case, point.overrides), options["cache_dir"], options["bones_dir"])
+            preflight(with_overrides(case, point.overrides), options["cache_dir"], options["bones_dir"],
+                      forceable=False)
         except UserError as exc:
             raise UserError(f"sweep point {point.label}: {exc}") from None
 

@@ -98,4 +98,4 @@ def check_recording_size(path: str | Path, limit: int, command: str) -> None:
     samples = recording_samples(path)
     if samples is not None and samples > limit:
         raise UserError(f"recording {path.name} holds about {samples:,} samples; {command} takes recordings of up to "
-                        f"{limit:,} (minutes at 10 kHz): crop it to the cut, or resample it")
+                        f"{limit:,} (100 s at 10 kHz): crop it to the cut, or resample it")
