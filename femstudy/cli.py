@@ -67,7 +67,7 @@ class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line and exit 2, like every user error."""
 
     def error(self, message: str):  # noqa: D102 - argparse API
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"femstudy: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -9,6 +9,8 @@ Metadata are the header block's rows and the ``key | value`` rows of a sheet nam
 
 from __future__ import annotations
 
+import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,8 @@ from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, plain_value
 from femstudy.recordings.units import is_units_row
 
+log = logging.getLogger(__name__)
+
 ZIP_SIGNATURE = b"PK\x03\x04"
 DATA_SHEETS = ("recording", "data")
 METADATA_SHEET = "metadata"
@@ -26,6 +30,9 @@ METADATA_SHEET = "metadata"
 #: femstudy.recordings.reader.MAX_SAMPLES) plus a header, and far more columns than channels.
 MAX_ROWS = 25_000_000 + 1000
 MAX_COLUMNS = 256
+#: Rows between progress reports, and the longest a sheet may take to read [s].
+PROGRESS_ROWS = 100_000
+READ_TIME_LIMIT_S = 120.0
 #: Largest uncompressed content of a workbook [bytes] (1 GiB, the limit on a recording file).
 MAX_UNCOMPRESSED_BYTES = 1 << 30
 
@@ -51,12 +58,20 @@ def _sheet_rows(ws, source: str) -> list[list]:
     is dropped first: openpyxl pads every row to the claimed width and height, and a 1.5 kB
     file claiming a million rows by 16,384 columns would fill memory."""
     ws.reset_dimensions()
-    rows = []
+    rows, start = [], time.monotonic()
     for row in ws.iter_rows(values_only=True):
         if len(rows) >= MAX_ROWS:
             raise UserError(f"recording {source}: sheet '{ws.title}' has more than {MAX_ROWS:,} rows; femstudy reads "
                             "recordings of up to 25 million samples: split it")
         rows.append(list(row[:MAX_COLUMNS]))
+        if len(rows) % PROGRESS_ROWS == 0:
+            log.info("read %d rows of %s", len(rows), source,
+                     extra={"progress": (f"reading {source}", len(rows), None)})
+            if time.monotonic() - start > READ_TIME_LIMIT_S:
+                raise UserError(f"reading recording {source} took longer than {READ_TIME_LIMIT_S:g} s "
+                                f"({len(rows):,} rows read); export it as CSV, which reads in seconds")
+    if len(rows) >= PROGRESS_ROWS:
+        log.info("read %s", source, extra={"progress": (f"reading {source}", None, None)})
     return rows
 
 

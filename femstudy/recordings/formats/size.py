@@ -58,7 +58,10 @@ def _prod(shape) -> int:
 def _tdms_samples(path: Path) -> int:
     from nptdms import TdmsFile
 
-    meta = TdmsFile.read_metadata(path)
+    from femstudy.recordings.formats.tdms import quiet_nptdms
+
+    with quiet_nptdms():
+        meta = TdmsFile.read_metadata(path)
     return max((len(channel) for group in meta.groups() for channel in group.channels()), default=0)
 
 
