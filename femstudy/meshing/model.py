@@ -18,6 +18,10 @@ from femstudy.meshing.frame import Frame
 log = logging.getLogger(__name__)
 
 
+#: Largest TetWild target edge [mm] (femstudy.casefile.MAX_MESH_SIZE_MM, docs/checks.md).
+MAX_TETWILD_SIZE_MM = 64.0
+
+
 @dataclass(frozen=True)
 class FemurSpec:
     """What the meshed femur depends on.
@@ -109,8 +113,8 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
     FemurModel
     """
     size = float(mesh_size_mm if mesh_size_mm is not None else spec.mesh.size_mm)
-    if not size > 0:
-        raise UserError(f"mesh size must be positive, got {size:g} mm")
+    if not 0 < size <= MAX_TETWILD_SIZE_MM:  # TetWild aborts on inf and runs for minutes past this
+        raise UserError(f"mesh size must lie in (0, {MAX_TETWILD_SIZE_MM:g}] mm, got {size:g} mm")
     cache_dir = Path(cache_dir)
     path = surface_file(spec, cache_dir)
     from femstudy.meshing.surface import check_surface_file, file_digest

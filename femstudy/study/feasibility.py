@@ -245,4 +245,8 @@ def preflight(case, cache_dir: Path, bones_dir: Path | None = None, force: bool 
     available = available_memory_bytes() if available_bytes is None else available_bytes
     e = check(case, surface_file(femur_spec(case), cache_dir), available, force=force)
     plausibility.check_inputs(case, bones_dir, force, forceable)
+    if case.drilling.depth_mm != "cortex":  # then the loads do not wait for the mesh
+        from femstudy.study.loading import case_loading
+
+        plausibility.check_loads(case_loading(case, float(case.drilling.depth_mm), bones_dir), force, forceable)
     return e

@@ -1,13 +1,16 @@
 """Physical plausibility gates: a study whose inputs or results cannot describe a femur being
 drilled stops with one line, or, with ``force``, runs on and is marked out of range.
 
-Three gates, each as early as what it checks is known:
+Four gates, each as early as what it checks is known:
 
 - before any work (:func:`input_findings`): a friction coefficient that the bone set's power
   law (thesis Eq 4.5) gives at an operating point outside the conditions it was calibrated
   on, when that value lies beyond half the smallest to twice the largest calibrated value.
   The human law is steep: at 3 mm/s and 1500 rpm it gives μ_w = 43 (calibrated 0.52–2.4),
   at 1.5 mm/s 0.03; the bovine law stays within its range far outside its box, and passes.
+- as soon as the loads are known (:func:`load_findings`; before any work when the depth is
+  given): a thrust beyond 10 kN or a torque beyond 100 N·m, the bounds of a drilling
+  recording (:mod:`femstudy.recordings.ranges`), or loads that are not finite numbers.
 - after meshing (:func:`site_findings`): a drilled depth deeper than the bone along the drill
   axis at the site (plus the drill's tip cone): the load model would cut bone that is not
   there.
@@ -95,6 +98,29 @@ def input_findings(case, bones_dir: Path | None = None) -> list[Finding]:
     from femstudy.drilling import load_bone_set
 
     return friction_findings(case.drilling, load_bone_set(case.drilling.bone, bones_dir))
+
+
+def load_findings(loading) -> list[Finding]:
+    """The drilling loads of a case (:class:`femstudy.study.loading.CaseLoading`) against
+    what a drill can push and turn (:data:`femstudy.recordings.ranges.MAX_MAGNITUDE`:
+    10 kN, 100 N·m, the bounds of a drilling recording)."""
+    from femstudy.recordings.ranges import MAX_MAGNITUDE
+
+    findings = []
+    for what, unit, limit, values in (
+            ("thrust", "N", MAX_MAGNITUDE["thrust"], [loading.dynamic.thrust_N, loading.static_thrust_N]),
+            ("torque", "N·mm", MAX_MAGNITUDE["torque"], [loading.dynamic.torque_Nmm, loading.static_torque_Nmm])):
+        values = np.concatenate([np.ravel(v) for v in values])
+        peak = float(np.max(np.abs(values))) if values.size else 0.0
+        if not np.all(np.isfinite(values)):
+            findings.append(Finding("not a number", f"the drilling {what} is not a finite number: the load model "
+                                                    "overflowed"))
+        elif peak > limit:
+            findings.append(Finding("load beyond a drill's", (
+                f"the drilling {what} reaches {peak:.3g} {unit}, beyond the {limit:g} {unit} any drill in bone "
+                f"exerts (friction mu_f = {loading.conditions.friction[0]:.3g}, mu_w = "
+                f"{loading.conditions.friction[1]:.3g}, load_scale and the feed set it)")))
+    return findings
 
 
 def bone_along_axis_mm(mesh, entry, direction, max_mm: float, step_mm: float = 0.05) -> float:
@@ -206,6 +232,11 @@ _warned: set[Finding] = set()
 def check_inputs(case, bones_dir: Path | None, force: bool, forceable: bool = True) -> list[dict]:
     """:func:`input_findings` enforced (see :func:`enforce`)."""
     return enforce(input_findings(case, bones_dir), force, forceable=forceable)
+
+
+def check_loads(loading, force: bool, forceable: bool = True) -> list[dict]:
+    """:func:`load_findings` enforced."""
+    return enforce(load_findings(loading), force, forceable=forceable)
 
 
 def check_site(case, model, force: bool) -> list[dict]:

@@ -237,6 +237,7 @@ def run_study(case: Case, out_dir: Path | None = None, *, mesh_size_mm: float | 
     clock["mesh"] = time.perf_counter()
 
     loading = case_loading(case, model.site.cortical_thickness_mm, bones_dir)
+    out_of_range += plausibility.check_loads(loading, force)
     times, dyn = loading.times_s, loading.dynamic
     log.info("loads: dynamic peak %.1f N / %.1f N.mm, static %.1f N / %.1f N.mm, %d steps of %g s",
              dyn.thrust_N.max(), dyn.torque_Nmm.max(), loading.static_thrust_N, loading.static_torque_Nmm,
