@@ -49,9 +49,10 @@ TET_VOLUME_PER_H3 = 0.1
 DOFS_PER_TET = {1: 0.6, 2: 4.7}
 FACTOR_SECONDS_PER_DOF2 = 1.2e-10
 BYTES_PER_STEP = 8 * 200
-#: The built-in femur's lowest natural frequency [Hz], its length [mm] and cortex's √(E/ρ)
-#: (Table 3-1), from which :func:`estimate` scales a bone's.
+#: The built-in femur's lowest natural frequency [Hz] and its length [mm] (with Table 3-1's
+#: cortex), from which :func:`lowest_frequency_hz` scales a bone's.
 REFERENCE_LOWEST_HZ, REFERENCE_LENGTH_MM = 560.0, 455.6
+#: Time of one resolved step [s]: the default case marches 6,943 in about 2 s.
 RESOLVED_SECONDS_PER_STEP = 3e-4
 #: Memory of meshing per final tetrahedron [bytes]: TetWild's background mesh (about three
 #: tets per final one) and the refinement's arrays, generously.
