@@ -3,11 +3,16 @@
 Every section has defaults that reproduce the thesis's FE set-up (§3.3, §5.9). Units are
 in the key names; material properties are given in the units the thesis tables use (GPa,
 kg/m³) and converted to the solver's MPa and tonne/mm³ by :class:`MaterialSpec`.
+
+Values are checked strictly: numbers must be finite TOML numbers (``true`` or ``"2.0"`` is
+not a feed), and every range follows from what the quantity can be on a femur; the bounds
+and their reasons are listed in docs/checks.md.
 """
 
 from __future__ import annotations
 
 import difflib
+import math
 import re
 from pathlib import Path
 from typing import Annotated, Literal, Union
@@ -25,26 +30,35 @@ PositiveMM = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 def _three_numbers(value):
     ok = (isinstance(value, (list, tuple)) and len(value) == 3
-          and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-          and any(v != 0 for v in value))
+          and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value))
     if not ok:
+        raise ValueError("a non-zero vector of three numbers [x, y, z]")
+    if not all(math.isfinite(v) for v in value):
+        raise ValueError("a vector of three finite numbers [x, y, z] (it holds nan or inf)")
+    if not any(v != 0 for v in value):
         raise ValueError("a non-zero vector of three numbers [x, y, z]")
     return tuple(float(v) for v in value)
 
 
 Vector3 = Annotated[tuple[float, float, float], BeforeValidator(_three_numbers)]
 ANATOMICAL_DIRECTIONS = ("anterior", "posterior", "lateral", "medial")
+#: A twist drill advances at most this far per turn [mm/rev] (surgical drilling: 0.01-0.2).
+MAX_FEED_PER_REV_MM = 1.0
+#: Largest TetWild target edge [mm] (:class:`MeshSpec`).
+MAX_MESH_SIZE_MM = 64.0
+#: A case file is a short text: larger files are refused before they are read.
+MAX_CASE_BYTES = 1 << 20
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
 
 
 class CortexSpec(_Section):
     """Cortical shell thickness along the long axis [mm]."""
 
-    midshaft_mm: PositiveMM = 6.0
-    epiphysis_mm: PositiveMM = 2.0
+    midshaft_mm: float = Field(6.0, gt=0, le=20)
+    epiphysis_mm: float = Field(2.0, gt=0, le=20)
 
 
 class CanalSpec(_Section):
@@ -54,7 +68,7 @@ class CanalSpec(_Section):
     Cancellous bone between the canal and the cortex thinner than ``min_cancellous_mm`` is
     not kept: the canal then reaches the cortex (docs/meshing.md)."""
 
-    diameter_mm: PositiveMM = 13.0
+    diameter_mm: float = Field(13.0, gt=0, le=50)
     min_cancellous_mm: float = Field(3.0, ge=0, le=20)
     proximal_fraction: float = Field(0.22, gt=0, lt=1)
     distal_fraction: float = Field(0.78, gt=0, lt=1)
@@ -83,22 +97,27 @@ class GeometrySpec(_Section):
 
 
 class MeshSpec(_Section):
-    """TetWild target edge lengths [mm] and element order."""
+    """TetWild target edge lengths [mm] and element order. A global size beyond 64 mm, more
+    than twice a femoral shaft's width, describes no bone (and TetWild then runs for minutes:
+    more than 300 s at 500 mm against 34 s at 64 mm, docs/checks.md); a site size below
+    0.05 mm is finer than bone's microstructure, where a continuum model no longer holds."""
 
-    size_mm: PositiveMM = 8.0
+    size_mm: float = Field(8.0, gt=0, le=MAX_MESH_SIZE_MM)
     refine: Literal["site", "uniform"] = "site"
-    site_size_mm: PositiveMM = 1.0
-    site_radius_mm: PositiveMM = 12.0
+    site_size_mm: float = Field(1.0, ge=0.05, le=MAX_MESH_SIZE_MM)
+    site_radius_mm: float = Field(12.0, gt=0, le=200)
     envelope: float = Field(1e-3, gt=0, le=0.05)
     order: Literal[1, 2] = 2
 
 
 class MaterialSpec(_Section):
-    """Isotropic linear elastic material in the thesis's units (Table 3-1)."""
+    """Isotropic linear elastic material in the thesis's units (Table 3-1). Bone's moduli
+    lie between about 10 MPa (osteoporotic cancellous) and 30 GPa (cortical), its density
+    between about 100 and 2100 kg/m³; the ranges allow an order of magnitude either side."""
 
-    youngs_modulus_GPa: float = Field(gt=0, le=100, allow_inf_nan=False)
+    youngs_modulus_GPa: float = Field(ge=0.001, le=100, allow_inf_nan=False)
     poissons_ratio: float = Field(gt=-1, lt=0.5)
-    density_kg_m3: float = Field(gt=0, le=5000)
+    density_kg_m3: float = Field(ge=10, le=5000)
 
     @property
     def youngs_modulus_MPa(self) -> float:
@@ -145,7 +164,7 @@ class MaterialsSpec(_Section):
 class ClampSpec(_Section):
     """Surface nodes within ``length_mm`` of each end, along the long axis, are fixed."""
 
-    length_mm: PositiveMM = 20.0
+    length_mm: float = Field(20.0, ge=1, le=1000)
 
 
 class SiteSpec(_Section):
@@ -179,12 +198,12 @@ class DrillingSpec(_Section):
     enter the resolved transient only (docs/load-models.md)."""
 
     model: str = "clogging"
-    feed_mm_s: float = Field(2.0, gt=0, le=50)
-    spindle_rpm: float = Field(1500.0, gt=0, le=100_000)
+    feed_mm_s: float = Field(2.0, ge=0.01, le=50)
+    spindle_rpm: float = Field(1500.0, ge=10, le=100_000)
     bone: str = "human"
     mu_f: float | None = Field(None, gt=0, le=5)
     mu_w: float | None = Field(None, gt=0, le=10)
-    depth_mm: Union[Literal["cortex"], Annotated[float, Field(gt=0, le=100)]] = 6.0
+    depth_mm: Union[Literal["cortex"], Annotated[float, Field(ge=0.1, le=100)]] = 6.0
     load_scale: float = Field(1.0, ge=0, le=100)
     flute_oscillation: float = Field(0.1, ge=0, lt=1)
     breakthrough_release_s: Union[Literal["flute"], Annotated[float, Field(gt=0, le=10)]] = "flute"
@@ -198,6 +217,15 @@ class DrillingSpec(_Section):
         if name not in choices:
             raise ValueError(f"'{name}' is not a load model for a study: choose one of {', '.join(choices)}")
         return name
+
+    @model_validator(mode="after")
+    def _drills(self):
+        a = 60.0 * self.feed_mm_s / self.spindle_rpm
+        if a > MAX_FEED_PER_REV_MM:
+            raise ValueError(f"feed_mm_s = {self.feed_mm_s:g} mm/s at spindle_rpm = {self.spindle_rpm:g} advances the "
+                             f"drill {a:.3g} mm per turn; a twist drill cuts at most {MAX_FEED_PER_REV_MM:g} mm per turn "
+                             "(surgical drilling: 0.01-0.2 mm)")
+        return self
 
 
 class LoadsSpec(_Section):
@@ -216,13 +244,15 @@ class LoadsSpec(_Section):
 
     application: Literal["hole", "surface_patch"] = "hole"
     stations: int = Field(3, ge=1, le=20)
-    distances_mm: list[PositiveMM] = Field(default_factory=lambda: [0.5, 1.0, 2.0, 5.0], min_length=1)
+    distances_mm: list[Annotated[float, Field(gt=0, le=50)]] = Field(
+        default_factory=lambda: [0.5, 1.0, 2.0, 5.0], min_length=1, max_length=20)
     headline_distance_mm: PositiveMM = 1.0
-    exclusion_radii_mm: list[PositiveMM] = Field(default_factory=lambda: [0.5, 1.0, 2.0, 3.0, 4.0], min_length=1)
+    exclusion_radii_mm: list[Annotated[float, Field(gt=0, le=50)]] = Field(
+        default_factory=lambda: [0.5, 1.0, 2.0, 3.0, 4.0], min_length=1, max_length=20)
     exclusion_radius_mm: PositiveMM = 1.0
     refinement: float = Field(2 / 3, gt=0, le=4)
     submodel_radius_mm: float = Field(8.0, gt=2, le=50)
-    depth_cap_mm: PositiveMM = 12.0
+    depth_cap_mm: float = Field(12.0, gt=0, le=100)
     smoothing_mm: float = Field(1.0, ge=0, le=5)
     convergence: Union[str, None] = None
 
@@ -247,7 +277,7 @@ class LoadsSpec(_Section):
 
 class TimeSpec(_Section):
     end_s: float = Field(3.0, gt=0, le=3600)
-    step_s: float = Field(0.1, gt=0)
+    step_s: float = Field(0.1, ge=1e-6)
 
     @model_validator(mode="after")
     def _step_fits(self):
@@ -263,10 +293,10 @@ class AnalysisSpec(_Section):
     there) to 0.1 s past the release: the dynamic amplification near the peak loads."""
 
     transient: bool = True
-    rayleigh_alpha_per_s: float = Field(0.0, ge=0)
-    rayleigh_beta_s: float = Field(0.0, ge=0)
+    rayleigh_alpha_per_s: float = Field(0.0, ge=0, le=1e4)
+    rayleigh_beta_s: float = Field(0.0, ge=0, le=1e-3)
     modes: int = Field(6, ge=0, le=100)
-    exclusion_radius_mm: PositiveMM = 4.0
+    exclusion_radius_mm: float = Field(4.0, gt=0, le=100)
     resolved: bool = True
     steps_per_period: int = Field(20, ge=10, le=200)
     resolved_lead_s: float = Field(0.5, gt=0, le=3600)
@@ -276,7 +306,7 @@ class OutputSpec(_Section):
     """What a run writes besides summary.json, timeseries.csv and report.md."""
 
     fields: bool = True
-    fields_every: int = Field(5, ge=1, description="write fields every n-th time step (and the last)")
+    fields_every: int = Field(5, ge=1, le=1_000_000, description="write fields every n-th time step (and the last)")
     figures: bool = True
     screenshot: bool = True
 
@@ -302,8 +332,9 @@ class Case(_Section):
     @field_validator("name")
     @classmethod
     def _name_is_a_folder_name(cls, name: str) -> str:
-        if not re.fullmatch(r"[A-Za-z0-9._-]+", name):
-            raise ValueError("name may contain only letters, digits, '.', '_' and '-' (it names the results folder)")
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}", name):
+            raise ValueError("name may contain only letters, digits, '.', '_' and '-', must begin with a letter or "
+                             "digit and have at most 100 characters (it names the results folder)")
         return name
 
     @field_validator("geometry")
@@ -427,8 +458,17 @@ def load_case(path: str | Path, bones_dir: Path | None = None) -> Case:
     2.0
     """
     path = Path(path)
-    if not path.is_file():
+    if path.is_dir():
+        inside = sorted(p.name for p in path.glob("*.toml"))[:3]
+        hint = f" (it holds {', '.join(inside)}: name one of them)" if inside else ""
+        raise UserError(f"case file {path} is a folder, not a case file{hint}")
+    if not path.exists():
         raise UserError(f"case file {path} does not exist")
+    if not path.is_file():
+        raise UserError(f"case file {path} is not a regular file (a device or a pipe?); give a TOML file")
+    if path.stat().st_size > MAX_CASE_BYTES:
+        raise UserError(f"case file {path} is {path.stat().st_size:,} bytes; a case file is a short TOML text "
+                        f"(at most {MAX_CASE_BYTES // 1024} kB)")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:

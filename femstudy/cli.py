@@ -2,11 +2,15 @@
 
 This is the one place that reads the environment: ``FEMSTUDY_CACHE`` (mesh cache folder,
 default ``.femstudy-cache``), ``FEMSTUDY_SOLVER`` (linear solver, default auto),
-``FEMSTUDY_BONES`` (calibrated bone sets, default the user's data folder); the library
-takes them as explicit parameters (:class:`Settings`).
+``FEMSTUDY_BONES`` (calibrated bone sets, default the user's data folder),
+``FEMSTUDY_LOGS`` (where the traceback of a bug is written, default the user's log folder);
+the library takes them as explicit parameters (:class:`Settings`).
 
-A :class:`~femstudy.errors.UserError` ends the program with one ``femstudy: error: ...``
-line on stderr and exit status 2; command-line syntax errors do the same.
+No traceback reaches the user. A :class:`~femstudy.errors.UserError`, a command-line syntax
+error, and a failure of the machine the user can act on (no memory, a full or read-only disk,
+a permission) end the program with one ``femstudy: error: ...`` line on stderr and exit
+status 2. Anything else is a bug: one ``femstudy: internal error: ...`` line naming the log
+file that holds the traceback (a forked process's included), and exit status 1.
 """
 
 from __future__ import annotations
@@ -15,11 +19,13 @@ import argparse
 import importlib
 import os
 import sys
+import time
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
 from femstudy import __version__
-from femstudy.errors import UserError
+from femstudy.errors import UserError, environment_message
 
 #: Sub-command modules, in the order ``femstudy --help`` lists them.
 COMMANDS = ["run", "view", "sweep", "mesh", "femur", "loads", "synth", "calibrate", "normality", "diagnose"]
@@ -32,12 +38,13 @@ class Settings:
     cache_dir: Path
     solver: str
     bones_dir: Path | None
+    log_dir: Path | None = None
 
     @classmethod
     def from_environment(cls, environ=os.environ) -> "Settings":
-        bones = environ.get("FEMSTUDY_BONES")
+        bones, logs = environ.get("FEMSTUDY_BONES"), environ.get("FEMSTUDY_LOGS")
         return cls(Path(environ.get("FEMSTUDY_CACHE") or ".femstudy-cache"), environ.get("FEMSTUDY_SOLVER", "auto"),
-                   Path(bones) if bones else None)
+                   Path(bones) if bones else None, Path(logs) if logs else None)
 
 
 def name_mkl_library(environ=os.environ) -> None:
@@ -60,7 +67,7 @@ class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line and exit 2, like every user error."""
 
     def error(self, message: str):  # noqa: D102 - argparse API
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"femstudy: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -72,18 +79,52 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    from femstudy import console
+def write_crash_log(exc: BaseException, argv: list[str], log_dir: Path | None = None) -> Path | None:
+    """Write ``exc``'s traceback (with its causes: a forked process's traceback is one) to a
+    new file in ``log_dir`` (default: the user's log folder, else the temporary folder);
+    return its path, or None when no folder takes it."""
+    import tempfile
 
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if not hasattr(args, "run"):
-        parser.print_help()
-        return 2
-    args.settings = Settings.from_environment()
-    name_mkl_library()
-    console.install(quiet=getattr(args, "quiet", False))
+    text = (f"femstudy {__version__}, {time.strftime('%Y-%m-%d %H:%M:%S')}\n"
+            f"command: femstudy {' '.join(argv)}\n\n" + "".join(traceback.format_exception(exc)))
+    folders = [log_dir] if log_dir is not None else []
     try:
+        import platformdirs
+
+        folders.append(platformdirs.user_log_path("femstudy"))
+    except ImportError:
+        pass
+    folders.append(Path(tempfile.gettempdir()))
+    for folder in folders:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            path = folder / f"femstudy-crash-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}.log"
+            path.write_text(text, encoding="utf-8")
+            return path
+        except OSError:
+            continue
+    return None
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0]}" if text else type(exc).__name__
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    settings = None
+    try:
+        from femstudy import console
+
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not hasattr(args, "run"):
+            parser.print_help()
+            return 2
+        args.settings = settings = Settings.from_environment()
+        name_mkl_library()
+        console.install(quiet=getattr(args, "quiet", False))
         return int(args.run(args) or 0)
     except UserError as exc:
         print(f"femstudy: error: {exc}", file=sys.stderr)
@@ -94,6 +135,15 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into e.g. `head`, which stopped reading
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except Exception as exc:  # noqa: BLE001 - the one place every failure is turned into a line
+        message = environment_message(exc)
+        if message is not None:
+            print(f"femstudy: error: {message}", file=sys.stderr)
+            return 2
+        log = write_crash_log(exc, argv, settings.log_dir if settings else None)
+        where = f"the traceback is in {log}" if log else "no log folder could be written"
+        print(f"femstudy: internal error: {_first_line(exc)} (a bug in femstudy; {where})", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

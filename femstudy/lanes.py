@@ -11,7 +11,11 @@ is asked for, wherever forking is not safe (:func:`can_fork`) or with ``parallel
 result is then the same to round-off (the thread counts, and so the order of BLAS sums, differ).
 
 An exception raised in a child is raised again in the caller, with the child's traceback as
-its cause; a :class:`~femstudy.errors.UserError` keeps its one-line message. Leaving the block
+its cause; a :class:`~femstudy.errors.UserError` keeps its one-line message, and so does a
+failure of the machine (no memory, a full disk: an ``OSError`` or ``MemoryError`` travels back
+as itself). A child that dies without a result (killed, or aborted in C code) is a
+:class:`LaneFailed` naming the lane and the signal; the command line turns each into one line
+(:mod:`femstudy.cli`). Leaving the block
 ends every child still running (SIGTERM, on which a child unwinds, so its atomic writes clean
 up), and a child ends when its parent does (killed, say): no lane outlives its run. Ctrl-C
 stops the caller, whose block then ends the children. A child's log records go to the
@@ -46,6 +50,27 @@ def can_fork() -> bool:
 
 class ChildTraceback(Exception):
     """The traceback of an exception raised in a lane's child process (set as its cause)."""
+
+
+class LaneFailed(RuntimeError):
+    """A lane's child process ended without sending a result (killed, or aborted in C code).
+    ``environment``: it was killed in a way the machine explains (out of memory, file size)."""
+
+    def __init__(self, message: str, environment: bool = False):
+        super().__init__(message)
+        self.environment = environment
+
+
+def describe_exit(code: int | None) -> str:
+    """A child's exit status in words: "exit code 3", "killed by SIGKILL"."""
+    if code is None:
+        return "no exit status"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"
 
 
 class Lane:
@@ -95,7 +120,11 @@ class Lane:
             status, value, seconds, text = self._receive.recv()
         except EOFError:
             self.close()
-            raise RuntimeError(f"the {self.name} process ended without a result (exit code {self.exitcode})") from None
+            hint = ("; the machine may have run out of memory" if self.exitcode == -signal.SIGKILL else
+                    "; is the disk full, or a file size limit set?" if self.exitcode in (-signal.SIGXFSZ, -signal.SIGBUS)
+                    else "")
+            raise LaneFailed(f"the {self.name} process ended without a result ({describe_exit(self.exitcode)})"
+                             f"{hint}", environment=bool(hint)) from None
         self.close()
         if status == "error":
             raise value from ChildTraceback(text)

@@ -2,7 +2,9 @@
 
 Every file femstudy reads that has a structure (case files, sweep files, bone sets) goes
 through :func:`parse_toml`: one ``path:line: key: what was expected, got …`` sentence for the
-first problem, and how many more there are.
+first problem, and how many more there are. Validation is strict: a TOML value must already
+have the key's type (``true`` is not a number, ``"2.0"`` is not a number, ``2.0`` is not a
+count); an integer is taken where a real number is expected.
 """
 
 from __future__ import annotations
@@ -108,7 +110,7 @@ def parse_toml(text: str, model: type[Model], where: str, prepare: Callable[[dic
     if prepare is not None:
         data = prepare(data)
     try:
-        return model.model_validate(data)
+        return model.model_validate(data, strict=True)
     except ValidationError as exc:
         errors = exc.errors()
         keys, message = describe(errors, model)

@@ -50,7 +50,7 @@ def test_surface_path_is_relative_to_the_case_file(tmp_path):
     ("name = 'x'\n[mesh]\nsize_mm = 'big'\n", ":3: mesh.size_mm: Input should be a valid number"),
     ("name = 'x'\n\n[mesh]\nsize_mm = -3\n", ":4: mesh.size_mm: Input should be greater than 0, got -3"),
     ("name = 'x'\n[drilling]\nfeed_mm_s = 500\n", ":3: drilling.feed_mm_s: Input should be less than or equal to 50"),
-    ("name = 'x'\n[drilling]\nspindle_rpm = 0\n", ":3: drilling.spindle_rpm: Input should be greater than 0"),
+    ("name = 'x'\n[drilling]\nspindle_rpm = 0\n", ":3: drilling.spindle_rpm: Input should be greater than or equal to 10"),
     ("name = 'x'\n[time]\nend_s = 1\nstep_s = 2\n", ":2: time: step_s = 2.0 s is larger than the span"),
     ("name = 'x'\n[site]\ndirection = 'up'\n", ":3: site.direction: Input should be 'anterior'"),
     ("name = 'x'\n[site]\ndirection = [1, 0]\n", "non-zero vector of three numbers"),
@@ -79,7 +79,7 @@ def test_overrides_are_validated_like_the_file():
     assert changed.drilling.feed_mm_s == 1.5 and changed.site.direction == "lateral"
     with pytest.raises(UserError, match="did you mean 'drilling.feed_mm_s'"):
         with_overrides(case, {"drilling.feed": 1.5})
-    with pytest.raises(UserError, match="drilling.feed_mm_s: Input should be greater than 0"):
+    with pytest.raises(UserError, match="drilling.feed_mm_s: Input should be greater than or equal to 0.01"):
         with_overrides(case, {"drilling.feed_mm_s": -1})
 
 

@@ -27,14 +27,14 @@ def test_extrapolation_is_warned():
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--feed", "0", "--rpm", "1500"], "feed must be a positive"),
-    (["--feed", "-2", "--rpm", "1500"], "feed must be a positive"),
-    (["--feed", "2", "--rpm", "0"], "spindle speed must be positive"),
-    (["--feed", "2", "--rpm", "1500", "--point-angle", "180"], "point angle"),
-    (["--feed", "2", "--rpm", "1500", "--point-angle", "0"], "point angle"),
-    (["--feed", "2", "--rpm", "1500", "--cortex-mm", "0"], "cortical thickness"),
+    (["--feed", "0", "--rpm", "1500"], "argument --feed: 0 mm/s is out of range: expected at least 0.01"),
+    (["--feed", "-2", "--rpm", "1500"], "argument --feed: -2 mm/s is out of range"),
+    (["--feed", "2", "--rpm", "0"], "argument --rpm: 0 rpm is out of range: expected at least 10"),
+    (["--feed", "2", "--rpm", "1500", "--point-angle", "180"], "argument --point-angle: 180 degrees is out of range"),
+    (["--feed", "2", "--rpm", "1500", "--point-angle", "0"], "argument --point-angle: 0 degrees is out of range"),
+    (["--feed", "2", "--rpm", "1500", "--cortex-mm", "0"], "argument --cortex-mm: 0 mm is out of range"),
     (["--feed", "2", "--rpm", "1500", "--bone", "goat"], "unknown bone coefficient set 'goat'"),
-    (["--feed", "fast", "--rpm", "1500"], "invalid float value"),
+    (["--feed", "fast", "--rpm", "1500"], "argument --feed: expected a number, got 'fast'"),
 ])
 def test_bad_input_exits_2_with_one_clear_line(args, message):
     proc = run_cli("loads", *args)

@@ -96,10 +96,14 @@ def test_random_case_files_validate_or_fail_cleanly(doc):
 
 @FAST
 @given(size=st.floats(1.0, 64.0), order=st.sampled_from([1, 2]), feed=st.floats(0.1, 50.0),
-       rpm=st.floats(10.0, 100_000.0), step=st.floats(1e-4, 1.0), end=st.floats(1.0, 10.0),
+       turns=st.floats(0.0, 1.0), step=st.floats(1e-4, 1.0), end=st.floats(1.0, 10.0),
        position=st.floats(0.01, 0.99), direction=st.sampled_from(["anterior", "posterior", "lateral", "medial"]),
        modulus=st.floats(0.1, 100.0), nu=st.floats(-0.9, 0.49))
-def test_every_valid_case_file_is_accepted(size, order, feed, rpm, step, end, position, direction, modulus, nu):
+def test_every_valid_case_file_is_accepted(size, order, feed, turns, step, end, position, direction, modulus, nu):
+    """Any speed from the one at which the feed advances the drill 1 mm a turn (the most a
+    twist drill cuts) up to 100,000 rpm is valid."""
+    lowest = max(10.0, 60.0 * feed / 1.0)
+    rpm = min(100_000.0, lowest * (100_000.0 / lowest) ** turns)
     text = (f'name = "fuzz"\n[mesh]\nsize_mm = {size!r}\norder = {order}\n[drilling]\nfeed_mm_s = {feed!r}\n'
             f'spindle_rpm = {rpm!r}\n[time]\nstep_s = {step!r}\nend_s = {end!r}\n[site]\nposition = {position!r}\n'
             f'direction = "{direction}"\n[materials.cortical]\nyoungs_modulus_GPa = {modulus!r}\n'

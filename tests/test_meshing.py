@@ -279,7 +279,7 @@ def test_mesh_command_writes_report_and_picture(builtin, cache_dir, tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "loaded cached mesh" in proc.stderr and "left femur" in proc.stdout
     assert {p.name for p in out.iterdir()} == {"mesh.vtu", "quality.json", "quality.txt", "frame.json",
-                                              "landmarks.json", "mesh.png"}
+                                              "landmarks.json", "mesh.png", ".femstudy.json"}  # the marker
     report = json.loads((out / "quality.json").read_text())
     assert report["stats"]["n_tets"] == m.mesh.n_tets and report["stats"]["cache_hit"] is True
     frame = json.loads((out / "frame.json").read_text())
@@ -310,11 +310,11 @@ def test_bad_surfaces_give_one_clear_line(tmp_path, setup, message):
         surface.write_bytes(b"")
     elif setup == "garbage":
         surface.write_bytes(b"\x00\x01 not a surface " * 40)
-    elif setup == "open":
-        box = pv.Box().triangulate()
+    elif setup == "open":  # femur-sized (300 mm), so that its units are told and its topology is judged
+        box = pv.Box().triangulate().scale(150.0)
         pv.PolyData.from_regular_faces(box.points, box.regular_faces[1:]).save(surface)
     elif setup == "two":
-        pv.Sphere().merge(pv.Sphere(center=(3, 0, 0))).save(surface)
+        pv.Sphere().merge(pv.Sphere(center=(3, 0, 0))).scale(100.0).save(surface)
     elif setup == "tiny":
         pv.Cylinder(radius=0.5, height=3.0).triangulate().clean().save(surface)
     case_file = tmp_path / "case.toml"

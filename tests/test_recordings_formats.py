@@ -116,14 +116,15 @@ def test_kistler_like_text_export_with_header_block_and_units_row(tmp_path):
              "Rate (Hz):\t1000.000000", "File Information", "Date\tOct 22, 2014  12:05:31", "Name\t",
              "Description\tbovine femur 3, hole 2", "feed_mm_s\t1.5", "spindle_rpm:\t1500",
              "abs time (s)\tFx\tFz\tMz", "\tN\tN\tN·m"]
-    lines += [f"{a:.6f}\t0.01\t{b:.6f}\t{c / 1000:.9f}" for a, b, c in zip(t, thrust, torque)]
+    fx = 0.01 + 0.002 * np.sin(7 * t)  # a lateral force that varies (a constant channel is refused as dead)
+    lines += [f"{a:.6f}\t{x:.6f}\t{b:.6f}\t{c / 1000:.9f}" for a, x, b, c in zip(t, fx, thrust, torque)]
     path = tmp_path / "kistler.txt"
     path.write_bytes("\r\n".join(lines).encode() + b"\r\n")
     rec = read_recording(path)
     np.testing.assert_allclose(rec.thrust_N, thrust, atol=1e-6)
     np.testing.assert_allclose(rec.torque_Nmm, torque, atol=1e-5)
     np.testing.assert_allclose(rec.time_s, t, atol=1e-9)
-    assert np.all(rec.fx_N == 0.01)
+    np.testing.assert_allclose(rec.fx_N, fx, atol=1e-6)
     assert (rec.feed_mm_s, rec.spindle_rpm) == (1.5, 1500)
     assert rec.metadata["Description"] == "bovine femur 3, hole 2" and "Name" not in rec.metadata
     assert rec.notes == ("Mz converted from N·m to N·mm (x1000)",)
@@ -276,9 +277,9 @@ def test_bad_binary_and_spreadsheet_files(tmp_path):
         "no_thrust.tdms": "has no thrust_N channel (newtons), nor another thrust channel (fz, thrust) with a unit; "
                           "its channels are: Time, Mz",
         "ragged.tdms": "its channels differ in length ('Time' 600 samples, 'Fz' 595 samples)",
-        "scalars.mat": "(MATLAB) has no numeric vector variables; femstudy needs one per column, e.g. t, Fz and Mz "
+        "scalars.mat": "(MATLAB) has no real numeric vector variables; femstudy needs one per column, e.g. t, Fz and Mz "
                        "(variables found: feed_mm_s, spindle_rpm)",
-        "matrix.mat": "(variables found: data, feed_mm_s); save the columns of data as vectors",
+        "matrix.mat": "(variables found: data (a 600 x 3 matrix)); save data as real vectors, one per channel",
         "words.xlsx": "sheet 'Sheet' has no row of numbers",
         "hole.xlsx": "hole.xlsx, row 5: an empty cell in column 'thrust [N]' is not a number",
         "fake.xlsx": "has a .xlsx name but is not an Excel .xlsx workbook",

@@ -102,7 +102,8 @@ def test_parameter_sweep_is_linear_in_load_and_identical_on_dask(case_file, mesh
 
 def test_bad_sweep_requests_fail_cleanly(case_file, tmp_path):
     assert_clean_failure(run_cli("sweep", str(case_file)), "needs --sizes")
-    assert_clean_failure(run_cli("sweep", str(case_file), "--sizes", "8,-4"), "--sizes must be positive")
+    assert_clean_failure(run_cli("sweep", str(case_file), "--sizes", "8,-4"),
+                         "argument --sizes: -4 mm is out of range: expected more than 0")
     bad = tmp_path / "bad.toml"
     bad.write_text(f'case = "{case_file.as_posix()}"\n[grid]\n"drilling.feed_mm_s" = [1.0, -2.0]\n')
     assert_clean_failure(run_cli("sweep", str(bad)), "feed_mm_s")

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from femstudy.commands.metadata import add_metadata_options, parse_settings
+from femstudy.commands.options import number
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,10 +24,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                                             "replaced as a whole")
     p.add_argument("--validate", nargs="+", type=Path, default=[], metavar="RUNS",
                    help="held-out recordings (e.g. at other conditions); default: --holdout replicates")
-    p.add_argument("--holdout", type=int, default=2,
+    p.add_argument("--holdout", type=number(0, 1000, integer=True, low_open=False), default=2,
                    help="replicates held out per condition when no --validate is given (2)")
     add_metadata_options(p, "every recording")
-    p.add_argument("--cutoff-hz", type=float, help="low-pass cut-off [Hz] (default from the feed, Table 4-4)")
+    p.add_argument("--cutoff-hz", type=number(0, 5000, "Hz"), help="low-pass cut-off [Hz] (default from the feed, Table 4-4)")
     p.add_argument("--no-ann", action="store_true", help="skip the neural-network neuron study")
     p.add_argument("--no-figures", action="store_true", help="write tables only")
     p.add_argument("--quiet", action="store_true", help="no progress messages")

@@ -7,6 +7,7 @@ import os
 from pathlib import Path
 
 from femstudy.commands.metadata import add_metadata_options, parse_settings
+from femstudy.commands.options import number
 from femstudy.drilling import registry
 from femstudy.errors import require
 
@@ -30,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                            "at its detected contact")
     p.add_argument("--bone", default="bovine",
                    help="bone set for --model and for the friction reading of chip clogging (bovine)")
-    p.add_argument("--cortex-mm", type=float,
+    p.add_argument("--cortex-mm", type=number(0, 20, "mm"),
                    help="cortical thickness [mm] (default: header cortex_mm, else the simulation's "
                         "breakthrough, else the depth reached, with a note)")
     add_metadata_options(p, "the recording")
@@ -38,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write report.md, overlay.png, residuals.png and diagnosis.json to DIR")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the overlay and residual figure")
-    p.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+    p.add_argument("--workers", type=number(1, 256, integer=True, low_open=False), default=os.cpu_count() or 1,
                    help="processes for the independent fits (default: every core; the result is the same)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
@@ -47,10 +48,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from femstudy.diagnosis import diagnose
 
+    from femstudy.recordings.formats.size import MAX_ANALYSED_SAMPLES, check_recording_size
+    from femstudy.writable import check_output_file, check_output_folder
+
     require(args.plot is None or args.plot.suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{args.plot}'")
     require(args.json is None or args.json.suffix.lower() == ".json", f"--json must end in .json, got '{args.json}'")
-    require(args.workers >= 1, f"--workers must be at least 1, got {args.workers}")
+    inputs = [args.recording, *([args.simulation] if args.simulation else [])]
+    for path, what in ((args.json, "the diagnosis"), (args.plot, "the figure")):
+        if path is not None:
+            check_output_file(path, what, inputs=inputs)
+    if args.report is not None:
+        check_output_folder(args.report, "the diagnosis report", inputs=inputs, cache_dir=args.settings.cache_dir)
+    for path in inputs:
+        check_recording_size(path, MAX_ANALYSED_SAMPLES, "diagnose")
     d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
                  columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
                  bone_library=args.settings.bones_dir, workers=args.workers)

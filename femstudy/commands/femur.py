@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from femstudy.commands.options import number
 from femstudy.meshing.builtin_femur import FemurParameters
 
 _HELP = {
@@ -30,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     defaults = FemurParameters()
     for name, text in _HELP.items():
         value = getattr(defaults, name)
-        p.add_argument("--" + name.replace("_", "-"), type=type(value), default=value,
+        p.add_argument("--" + name.replace("_", "-"), type=number(integer=isinstance(value, int)), default=value,
                        help=f"{text} ({value:g})")
     p.set_defaults(run=run)
 
@@ -38,8 +39,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from femstudy.errors import require
     from femstudy.meshing.builtin_femur import write_femur
+    from femstudy.writable import check_output_file
 
     require(args.out.suffix.lower() == ".stl", f"--out must end in .stl, got '{args.out}'")
+    check_output_file(args.out, "the femur surface")
     par = FemurParameters(**{name: getattr(args, name) for name in _HELP})
     surf = write_femur(args.out, par)  # written through a link (meshes/ links to the packaged file)
     print(f"wrote {args.out}: {surf.n_cells} triangles, {surf.n_points} points, volume {surf.volume:.0f} mm^3, "

@@ -20,7 +20,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from femstudy.recordings.normality import normality_study
+    from femstudy.writable import check_output_file
 
+    if args.plot is not None:
+        check_output_file(args.plot, "the figure", inputs=[args.trials] if args.trials else [])
     text = normality_study(args.trials, plot_path=args.plot)
     print(text)
     if args.plot:

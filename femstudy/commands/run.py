@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from femstudy.casefile import MAX_MESH_SIZE_MM
+from femstudy.commands.options import number
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("run", help="run the drilling study of one or more case files",
@@ -15,10 +18,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, help="results folder (one case only; default results/<case name>)")
     p.add_argument("--study-out", type=Path, default=Path("results/study"),
                    help="folder of the combined table when several cases run (results/study)")
-    p.add_argument("--mesh-size", type=float, metavar="MM", help="override the case's mesh size [mm]")
+    p.add_argument("--mesh-size", type=number(0, MAX_MESH_SIZE_MM, "mm"), metavar="MM",
+                   help="override the case's mesh size [mm]")
     p.add_argument("--bone", metavar="NAME", help="friction calibration for every case: human, human-printed, "
                                                  "bovine or a calibrated set (default: each case's)")
-    p.add_argument("--force", action="store_true", help="run a study estimated to take very long")
+    p.add_argument("--force", action="store_true",
+                   help="run a study estimated to take very long, or one whose inputs or results fail a plausibility "
+                        "check (docs/checks.md); such results are marked out of range in report.md and summary.json")
     p.add_argument("--no-kept-solutions", dest="keep_solutions", action="store_false",
                    help="factorise even when an earlier run kept the solutions of the same stiffness "
                         "matrices (in the cache folder; docs/solver.md)")
@@ -47,8 +53,9 @@ def run(args: argparse.Namespace) -> int:
         else:
             stress = (f"max von Mises under the patch {d['max_von_mises_MPa'].value:.4g} / "
                       f"{st['max_von_mises_MPa'].value:.4g} MPa")
+        marked = " [OUT OF RANGE (--force): see report.md]" if r.out_of_range else ""
         print(f"{r.case.name}: max deflection {d['max_deflection_mm'].value:.4g} mm dynamic / "
-              f"{st['max_deflection_mm'].value:.4g} mm static; {stress} -> {r.out_dir}")
+              f"{st['max_deflection_mm'].value:.4g} mm static; {stress} -> {r.out_dir}{marked}")
     if table is not None:
         print(f"combined table: {table}")
     return 0

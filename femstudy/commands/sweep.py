@@ -5,12 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-
-def _numbers(text: str) -> list[float]:
-    try:
-        return [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated sizes in mm, got '{text}'") from None
+from femstudy.casefile import MAX_MESH_SIZE_MM
+from femstudy.commands.options import number, numbers
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,12 +15,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "Richardson extrapolation, GCI, recommended size). With a sweep file "
                                    "(case = ..., [grid] / [[point]]): the study at every parameter point.")
     p.add_argument("file", type=Path, metavar="CASE_OR_SWEEP.toml")
-    p.add_argument("--sizes", type=_numbers, metavar="MM,MM,...", help="global element sizes [mm]")
+    p.add_argument("--sizes", type=numbers(0, MAX_MESH_SIZE_MM, "mm"), metavar="MM,MM,...",
+                   help="global element sizes [mm], three or more different ones")
     p.add_argument("--order", choices=("1", "2", "both"), default="2", help="element order (2)")
     p.add_argument("--refine", choices=("site", "uniform", "both"), default="site",
                    help="local refinement at the drill site (site)")
-    p.add_argument("--target", type=float, default=0.02, help="target relative error on max deflection (0.02)")
-    p.add_argument("--workers", type=int, default=1, help="local worker processes (1)")
+    p.add_argument("--target", type=number(0, 1, high_open=True), default=0.02, help="target relative error on max deflection (0.02)")
+    p.add_argument("--workers", type=number(1, 256, integer=True, low_open=False), default=1, help="local worker processes (1)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--out", type=Path, help="sweep folder (default results/sweep-<name>)")
     p.add_argument("--quiet", action="store_true")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from dataclasses import dataclass, field
@@ -15,6 +16,10 @@ from femstudy.meshing import cache, landmarks
 from femstudy.meshing.frame import Frame
 
 log = logging.getLogger(__name__)
+
+
+#: Largest TetWild target edge [mm] (femstudy.casefile.MAX_MESH_SIZE_MM, docs/checks.md).
+MAX_TETWILD_SIZE_MM = 64.0
 
 
 @dataclass(frozen=True)
@@ -108,8 +113,8 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
     FemurModel
     """
     size = float(mesh_size_mm if mesh_size_mm is not None else spec.mesh.size_mm)
-    if not size > 0:
-        raise UserError(f"mesh size must be positive, got {size:g} mm")
+    if not 0 < size <= MAX_TETWILD_SIZE_MM:  # TetWild aborts on inf and runs for minutes past this
+        raise UserError(f"mesh size must lie in (0, {MAX_TETWILD_SIZE_MM:g}] mm, got {size:g} mm")
     cache_dir = Path(cache_dir)
     path = surface_file(spec, cache_dir)
     from femstudy.meshing.surface import check_surface_file, file_digest
@@ -118,24 +123,25 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
     digest = file_digest(path)
     key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size)})
     start = time.perf_counter()
-    hit = cache.load(key, cache_dir)
-    if hit is None:
-        # two stages, cached apart: the TetWild mesh (shared by every drill site) and its
-        # refinement around this site
-        base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size, with_site=False)})
-        base = cache.load(base_key, cache_dir) if base_key != key else None
-        if base is None:
-            log.info("meshing %s at %g mm (not cached)", path.name, size)
-            base = _build(spec, path, size)
-            if base_key != key:
-                cache.store(base_key, *base, root=cache_dir)
+    with cache.lock(key, cache_dir):  # a second process asking for this mesh waits, then loads it
+        hit = cache.load(key, cache_dir)
+        if hit is None:
+            # two stages, cached apart: the TetWild mesh (shared by every drill site) and its
+            # refinement around this site
+            base_key = cache.cache_key({"surface_sha256": digest, **mesh_parameters(spec, size, with_site=False)})
+            with cache.lock(base_key, cache_dir) if base_key != key else contextlib.nullcontext():
+                base = cache.load(base_key, cache_dir) if base_key != key else None
+                if base is None:
+                    log.info("meshing %s at %g mm (not cached)", path.name, size)
+                    base = _build(spec, path, size)
+                    if base_key != key:
+                        base = cache.store(base_key, *base, root=cache_dir)
+                else:
+                    log.info("loaded the cached TetWild mesh %s; refining it at the drill site", base_key[:12])
+            arrays, meta = cache.store(key, *_finish(spec, size, *base), root=cache_dir)
         else:
-            log.info("loaded the cached TetWild mesh %s; refining it at the drill site", base_key[:12])
-        arrays, meta = _finish(spec, size, *base)
-        cache.store(key, arrays, meta, root=cache_dir)
-    else:
-        log.info("loaded cached mesh %s (%s)", key[:12], cache_dir)
-        arrays, meta = hit
+            log.info("loaded cached mesh %s (%s)", key[:12], cache_dir)
+            arrays, meta = hit
     mesh = TetMesh(arrays["points"], arrays["tets"].astype(np.int64), arrays["region"].astype(np.int8))
     frame = Frame.from_dict(meta["frame"])
     outer = landmarks.outer_faces(mesh, frame)

@@ -20,6 +20,16 @@ from femstudy.errors import UserError, require
 from femstudy.meshing.intersections import self_intersections
 
 SUFFIXES = (".stl", ".obj", ".ply", ".vtp", ".vtk", ".vtu", ".off")
+#: Largest surface read: femstudy simplifies every surface to a few thousand triangles before
+#: TetWild (femstudy.meshing.model.surface_edge_mm), and a CT femur needs no more than a few
+#: hundred thousand; a file announcing more is refused before anything is allocated.
+MAX_TRIANGLES = 2_000_000
+MAX_POINTS = 2_000_000
+#: Largest surface file [bytes]: an ASCII STL of MAX_TRIANGLES is about 500 MB.
+MAX_SURFACE_BYTES = 600 * 2 ** 20
+#: Fewest bytes one point or face takes in a file (three ASCII digits and separators; a
+#: binary float triple is 12), to check a header's counts against the file's size.
+MIN_BYTES_PER_ITEM = 6
 
 
 @dataclass
@@ -123,12 +133,22 @@ def check_surface_file(path: Path) -> None:
     require(path.stat().st_size > 0, f"surface file {path} is empty")
     require(path.suffix.lower() in SUFFIXES,
             f"surface file {path} has an unknown format '{path.suffix}' (use one of {', '.join(SUFFIXES)})")
+    size = path.stat().st_size
+    require(size <= MAX_SURFACE_BYTES, f"surface file {path} is {size / 2 ** 20:.0f} MB; femstudy reads surfaces up "
+                                       f"to {MAX_SURFACE_BYTES // 2 ** 20} MB ({MAX_TRIANGLES:,} triangles): decimate "
+                                       "it first (it is simplified to a few thousand triangles anyway)")
+
+
+def _is_text(data: bytes) -> bool:
+    """Whether ``data`` is plain ASCII text (tabs and line ends allowed)."""
+    return all(32 <= b < 127 or b in (9, 10, 13) for b in data)
 
 
 def _check_stl_complete(path: Path) -> None:
-    """Refuse an STL file that stops early (VTK would read the part that is there and report
-    holes, or nothing). A binary STL is an 80-byte header, a 4-byte triangle count n and n
-    records of 50 bytes; an ASCII one starts with "solid" and ends with "endsolid"."""
+    """Refuse an STL file that stops early or announces more than it holds (VTK would read the
+    part that is there and report holes, or allocate what the header claims and abort). A
+    binary STL is an 80-byte header, a 4-byte triangle count n and n records of 50 bytes; an
+    ASCII one is text that starts with "solid" and ends with "endsolid"."""
     size = path.stat().st_size
     with open(path, "rb") as fh:
         head = fh.read(512)
@@ -136,8 +156,11 @@ def _check_stl_complete(path: Path) -> None:
         tail = fh.read()
     announced = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
     if 84 + 50 * announced == size:
+        require(announced <= MAX_TRIANGLES, f"surface file {path} holds {announced:,} triangles; femstudy reads up to "
+                                            f"{MAX_TRIANGLES:,}: decimate it first (it is simplified to a few thousand "
+                                            "triangles anyway)")
         return
-    if head[:5].lower() == b"solid":
+    if head[:5].lower() == b"solid" and _is_text(head):
         if b"endsolid" not in tail.lower():
             raise UserError(f"cannot read surface file {path}: the ASCII STL is cut short (it does not end with 'endsolid')")
         return
@@ -149,7 +172,48 @@ def _check_stl_complete(path: Path) -> None:
                         f"of the {announced:,} triangles its binary STL header announces)")
 
 
-def read_polydata(path: Path):
+_COUNT_PATTERNS = {  # header lines that announce how many points and faces follow
+    ".ply": rb"element\s+(?:vertex|face)\s+(\d+)",
+    ".vtk": rb"(?:POINTS|POLYGONS|CELLS|TRIANGLE_STRIPS)\s+(\d+)",
+    ".vtu": rb"Number\s*Of\s*(?:Points|Cells|Polys)\s*=\s*\"(\d+)\"",
+    ".vtp": rb"Number\s*Of\s*(?:Points|Cells|Polys)\s*=\s*\"(\d+)\"",
+}
+
+
+def _check_header_counts(path: Path) -> None:
+    """Refuse a file whose header announces more points or faces than femstudy reads, or
+    than its size can hold, before a reader allocates them (an STL by its own rule,
+    :func:`_check_stl_complete`; an OFF by its counts line)."""
+    import re
+
+    suffix, size = path.suffix.lower(), path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(64 * 1024)
+    if suffix == ".stl":
+        return _check_stl_complete(path)
+    if suffix == ".off":
+        lines = [ln.split(b"#")[0].strip() for ln in head.splitlines()]
+        lines = [ln for ln in lines if ln]
+        if lines and lines[0].upper().endswith(b"OFF"):
+            counts = (lines[0][:-3].split() or (lines[1].split() if len(lines) > 1 else []))[:2]
+            claims = [int(c) for c in counts if c.isdigit()]
+        else:
+            claims = []
+    elif suffix in _COUNT_PATTERNS:
+        claims = [int(c) for c in re.findall(_COUNT_PATTERNS[suffix], head, flags=re.IGNORECASE)]
+    else:
+        return
+    for claim in claims:
+        require(claim <= max(MAX_POINTS, MAX_TRIANGLES),
+                f"surface file {path}: its header announces {claim:,} points or faces; femstudy reads up to "
+                f"{MAX_TRIANGLES:,}: decimate it first")
+        compressed = suffix in (".vtu", ".vtp")  # XML files may hold compressed data
+        require(compressed or claim * MIN_BYTES_PER_ITEM <= size,
+                f"cannot read surface file {path}: its header announces {claim:,} points or faces, more than "
+                f"its {size:,} bytes can hold (is it a complete {suffix.lstrip('.').upper()} file?)")
+
+
+def _read_any(path: Path):
     """Read ``path`` into a PolyData of its outer faces, or raise UserError.
 
     VTK reads it, and meshio when VTK fails or finds nothing; the first complaint is the
@@ -161,8 +225,7 @@ def read_polydata(path: Path):
 
     import pyvista as pv
 
-    if path.suffix.lower() == ".stl":
-        _check_stl_complete(path)
+    _check_header_counts(path)
     mesh, complaint = None, ""
     if path.suffix.lower() != ".ply":
         try:
@@ -218,6 +281,31 @@ def _read_meshio(path: Path):
     return pv.PolyData(np.asarray(m.points, float)[:, :3], faces)
 
 
+def read_points(path: str | Path):
+    """Read a surface file into a PolyData after checking what can be checked first: the
+    file (:func:`check_surface_file`), its header's counts against its size and
+    :data:`MAX_TRIANGLES`, and then the points: finite, and spanning what a femur spans in
+    mm, cm, m or inches (a file scaled by 1e30 is refused here, not handed to VTK's filters).
+    """
+    from femstudy.meshing.frame import UNIT_RANGES
+
+    path = Path(path)
+    check_surface_file(path)
+    mesh = _read_any(path)
+    require(mesh.n_cells <= MAX_TRIANGLES and mesh.n_points <= MAX_POINTS,
+            f"surface file {path} holds {mesh.n_cells:,} faces and {mesh.n_points:,} points; femstudy reads up to "
+            f"{MAX_TRIANGLES:,}: decimate it first")
+    points = np.asarray(mesh.points, float)
+    require(np.isfinite(points).all(), f"surface file {path} has non-finite point coordinates")
+    if len(points):
+        extent = float(np.ptp(points, axis=0).max())
+        lo, hi = min(r[0] for r in UNIT_RANGES.values()), max(r[1] for r in UNIT_RANGES.values())
+        require(lo / 10 <= extent <= hi * 10,
+                f"surface file {path} spans {extent:.3g} in its own units: no femur is that long in mm, cm, m or "
+                "inches (expected 200-750 mm, 24.5-75 cm, 0.2-0.75 m or 8-24 in); is it scaled?")
+    return mesh
+
+
 def read_surface(path: str | Path, bodies: str = "one") -> Surface:
     """Read, clean and check a closed surface file; raise :class:`UserError` if unusable.
 
@@ -240,11 +328,9 @@ def read_surface(path: str | Path, bodies: str = "one") -> Surface:
     12000
     """
     path = Path(path)
-    check_surface_file(path)
-    mesh = read_polydata(path)
+    mesh = read_points(path)
     require(mesh.n_points > 0 and mesh.n_cells > 0,
             f"cannot read surface file {path}: no triangles in it (is it a valid {path.suffix.lstrip('.').upper()} file?)")
-    require(np.isfinite(mesh.points).all(), f"surface file {path} has non-finite point coordinates")
     extent = np.ptp(np.asarray(mesh.points, float), axis=0)
     require(extent.min() > 1e-6 * extent.max(),
             f"surface file {path} is a flat (2-D) mesh; give the closed outer surface of the bone")

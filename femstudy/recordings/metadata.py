@@ -16,7 +16,7 @@ import tomllib
 from typing import Any, Mapping
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from femstudy.errors import UserError
 
@@ -40,6 +40,14 @@ class RecordingMetadata(BaseModel):
     samples: int | None = Field(None, ge=0)
     contact_s: float | None = Field(None, allow_inf_nan=False)
     cut_end_s: float | None = Field(None, allow_inf_nan=False)
+
+    @field_validator("feed_mm_s", "spindle_rpm", "drill_diameter_mm", "point_angle_deg", "samples", "contact_s",
+                     "cut_end_s", mode="before")
+    @classmethod
+    def _not_a_truth_value(cls, value):
+        if isinstance(value, (bool, np.bool_)):
+            raise ValueError("Input should be a number, not true or false")
+        return value
 
 
 REQUIRED_KEYS = tuple(k for k, f in RecordingMetadata.model_fields.items() if f.is_required())
@@ -139,7 +147,8 @@ def validate_metadata(found: Mapping[str, Any], origins: Mapping[str, str], over
         error = exc.errors()[0]
         key = str(error["loc"][0]) if error["loc"] else "(metadata)"
         place = f", {where[key]}" if key in where else ""
-        raise UserError(f"recording {source}{place}: {key}: {error['msg']}, got {show(values.get(key))}") from None
+        raise UserError(f"recording {source}{place}: {key}: {error['msg'].removeprefix('Value error, ')}, "
+                        f"got {show(values.get(key))}") from None
     return {**values, **model.model_dump(exclude_none=True)}, notes
 
 

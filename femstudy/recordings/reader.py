@@ -35,6 +35,7 @@ from femstudy.recordings.columns import assign_channels, parse_column_map
 from femstudy.recordings.formats import registry, text
 from femstudy.recordings.formats.text import TextStyle
 from femstudy.recordings.metadata import check_declared_samples, validate_metadata
+from femstudy.recordings.ranges import check_values
 from femstudy.recordings.units import QUANTITY_UNITS, factor_to_solver
 
 MIN_RATE_HZ, MAX_RATE_HZ = 100.0, 10_000.0
@@ -149,6 +150,7 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
                     depth_mm=values.get("depth"), fx_N=values.get("fx"), fy_N=values.get("fy"),
                     metadata=metadata, source=str(path), notes=tuple(notes))
     check_recording(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
+    check_values(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
     return rec
 
 

@@ -9,12 +9,9 @@ A unit of the wrong dimension, or one pint does not know, is one UserError sente
 from __future__ import annotations
 
 import functools
-import logging
 import re
 
 from femstudy.errors import UserError
-
-logger = logging.getLogger(__name__)
 
 #: quantity -> (femstudy's unit, the dimension's name, examples for messages)
 QUANTITY_UNITS = {
@@ -31,14 +28,16 @@ _PRODUCT_SIGNS = re.compile(r"\s*[·⋅•×∙]\s*|(?<=[A-Za-z])-(?=[A-Za-z])")
 
 @functools.lru_cache(maxsize=1)
 def registry():
-    """The pint unit registry (loaded once; pint's own cache makes later loads fast)."""
+    """The pint unit registry, built from pint's definitions once per process.
+
+    pint's disk cache stays off (``cache_folder=None``, pint's default): it is a folder
+    femstudy does not own, shared with every program using pint, whose entries pint
+    unpickles, so a half-written entry made valid units unknown and a planted one would run
+    code. Building the registry without it costs about a second, once, and only when a
+    recording has units other than femstudy's own."""
     import pint
 
-    try:
-        return pint.UnitRegistry(cache_folder=":auto:")
-    except OSError:  # no writable cache folder: load from the definitions
-        logger.debug("pint's cache folder is not writable; loading units without it")
-        return pint.UnitRegistry()
+    return pint.UnitRegistry(cache_folder=None)
 
 
 def normalise_unit(text: str) -> str:

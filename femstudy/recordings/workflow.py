@@ -85,7 +85,9 @@ def calibrate(runs, validate=(), *, name: str = "calibrated", out: Path | None =
     from femstudy.drilling.friction import BUILTIN_TABLES, default_bone_library
     from femstudy.recordings import figures as draw, read_recording, report
     from femstudy.recordings.pipeline import calibrate as run_pipeline
+    from femstudy.recordings.formats.size import MAX_ANALYSED_SAMPLES, check_recording_size
     from femstudy.recordings.processing import process
+    from femstudy.writable import check_output_folder
 
     require(re.fullmatch(r"[A-Za-z0-9._-]+", name) is not None and not name.startswith("."),
             f"--name may contain only letters, digits, '.', '_' and '-', got '{name}'")
@@ -93,11 +95,13 @@ def calibrate(runs, validate=(), *, name: str = "calibrated", out: Path | None =
     require(holdout >= 0, f"--holdout must be >= 0, got {holdout}")
     require(cutoff_hz is None or cutoff_hz > 0, f"--cutoff-hz must be positive, got {cutoff_hz}")
     out = Path(out) if out is not None else Path("results") / "calibration" / name
-    require(not out.exists() or out.is_dir(), f"--out {out} exists and is not a folder")
     cal_paths, val_paths = recording_paths(runs, "RUNS"), recording_paths(validate, "--validate")
+    check_output_folder(out, "the calibration", inputs=[*runs, *validate])
     clash = {p.name for p in cal_paths} & {p.name for p in val_paths}
     if clash:
         raise UserError(f"{sorted(clash)[0]} is both a calibration and a validation recording")
+    for path in cal_paths + val_paths:
+        check_recording_size(path, MAX_ANALYSED_SAMPLES, "calibrate")
 
     recordings = []
     for path in cal_paths + val_paths:

@@ -26,6 +26,17 @@ def thesis_values(site_name: str):
     return (MAX_DEFLECTION_MM[key], MAX_VON_MISES_MPA[key]) if key else None
 
 
+def out_of_range_banner(summary: dict) -> list[str]:
+    """Lines that mark a study run with ``--force`` past failed plausibility gates
+    (femstudy.study.plausibility), or none."""
+    found = summary.get("out_of_range") or []
+    if not found:
+        return []
+    return (["**OUT OF RANGE.** This study was run with `--force` past femstudy's plausibility checks "
+             "(docs/checks.md); its numbers do not describe a drilled femur:", ""]
+            + [f"- {f['check']}: {f['message']}" for f in found] + [""])
+
+
 def run_report(summary: dict) -> str:
     """A short Markdown report a researcher can paste from."""
     case, mesh, site, load = summary["case"], summary["mesh"], summary["site"], summary["loading"]
@@ -39,7 +50,7 @@ def run_report(summary: dict) -> str:
     hole = summary.get("hole")
     if hole:  # the patch's peak stress is mesh-dependent: the hole's measures replace it
         rows = rows[:2]
-    lines = [f"# {case['name']}: drilling at the {site['name']} site", "",
+    lines = [f"# {case['name']}: drilling at the {site['name']} site", ""] + out_of_range_banner(summary) + [
              case.get("description", ""), "",
              f"Femur: {mesh['surface']} ({mesh['length_mm']:.0f} mm), {mesh['n_tets']:,} tetrahedra, "
              f"P{case['mesh']['order']} elements, {solver['dofs']:,} DOFs; both ends clamped over "
@@ -119,7 +130,8 @@ def study_table(summaries: list[dict]) -> str:
         d, v, ve = res["max_deflection_mm"], res["max_von_mises_MPa"], res["max_von_mises_excl_MPa"]
         row = THESIS_SITE.get(s["site"]["name"].lower())
         td, tv = thesis_values(s["site"]["name"]) or ((None, None), (None, None))
-        lines.append(f"| {s['site']['name']} | {s['loading']['bone_set']} | {row or 'none (not a thesis site)'} | "
+        marked = " (OUT OF RANGE, --force)" if s.get("out_of_range") else ""
+        lines.append(f"| {s['site']['name']}{marked} | {s['loading']['bone_set']} | {row or 'none (not a thesis site)'} | "
                      f"{_fmt(d['dynamic']['value'])} | {_fmt(d['static']['value'])} | "
                      f"{_fmt(d['ratio_dynamic_to_static'], 3)} | {_fmt(td[0])} | {_fmt(td[1])} | "
                      f"{_fmt(v['dynamic']['value'])} | {_fmt(v['static']['value'])} | "

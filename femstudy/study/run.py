@@ -26,7 +26,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import datetime, timezone
 from functools import partial
 from os import PathLike
@@ -41,7 +41,7 @@ from femstudy.fe.linsolve import available_memory_bytes
 from femstudy.hole.study import hole_stresses
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.meshing.model import surface_file
-from femstudy.study import feasibility, output, verdicts
+from femstudy.study import feasibility, output, plausibility, verdicts
 from femstudy.study.femur import femur_spec
 from femstudy.study.global_model import GlobalModel, prepare
 from femstudy.study.loading import CaseLoading, case_loading, resolved_loading
@@ -79,7 +79,8 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         Folder of calibrated bone sets named by ``case.drilling.bone``.
     force : bool
         Run even when the study is estimated to take very long (one that cannot fit in
-        memory is refused regardless).
+        memory is refused regardless), or when an input or a result fails a plausibility gate
+        (:mod:`femstudy.study.plausibility`): then it is marked out of range.
     keep_solutions : bool
         Serve the solves from the solutions an earlier run kept for the same stiffness matrices
         and keep this run's (:mod:`femstudy.fe.kept`): a repeated study, or one that changes only
@@ -107,12 +108,15 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
     if mesh_size_mm is not None:  # so that summary.json echoes the size actually used
         case = with_overrides(case, {"mesh.size_mm": mesh_size_mm}, what="--mesh-size")
     feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force)
+    out_of_range = plausibility.check_inputs(case, bones_dir, force)
     record_path = case.convergence_path()
     record = None if record_path is None else verdicts.read_record(record_path)  # a bad record fails now
     log.info("case '%s': building or loading the femur mesh", case.name)
     checked = time.perf_counter()
     model = prepare(case, cache_dir)
+    out_of_range += plausibility.check_site(case, model.femur, force)
     loading = case_loading(case, model.femur.site.cortical_thickness_mm, None if bones_dir is None else Path(bones_dir))
+    out_of_range += plausibility.check_loads(loading, force)
     dyn = loading.dynamic
     log.info("loads: dynamic peak %.1f N / %.1f N.mm, static %.1f N / %.1f N.mm, %d steps of %g s",
              dyn.thrust_N.max(), dyn.torque_Nmm.max(), loading.static_thrust_N, loading.static_torque_Nmm,
@@ -162,6 +166,8 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         result = StudyResult(case, model.femur, loading, solver_record, step.dynamic, step.static, dynamics, hole,
                              convergence, timings, datetime.now(timezone.utc).isoformat(timespec="seconds"),
                              figures, None if out_dir is None else Path(out_dir))
+        out_of_range += plausibility.check_results(result.to_json(), model.femur.frame.length_mm, force)
+        result = replace(result, out_of_range=tuple(out_of_range))
         if folder is not None:
             output.write_summary(folder, result)
     return result

@@ -9,15 +9,20 @@ from femstudy import atomic
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.study.report import study_discussion, study_table
 
+#: Disk a case's results need, checked before it runs [bytes]: twice the 50 MB of the default
+#: case's folder (fields of 7 frames of a 60,000-node mesh), a tenth of that without fields.
+RESULTS_BYTES_WITH_FIELDS, RESULTS_BYTES = 100e6, 10e6
+
 
 def write_study(folder: Path, summaries: list[dict]) -> Path:
     """Write ``study.md`` (table beside Tables 5-14/5-15 plus discussion) and ``study.json``."""
     text = "\n".join(["# Drilling study: all sites", "", study_table(summaries), "", study_discussion(summaries)])
-    folder = Path(folder)
-    atomic.write_text(folder / "study.md", text)
-    atomic.write_text(folder / "study.json", json.dumps(
-        [{"case": s["case"]["name"], "site": s["site"]["name"], "results": s["results"]} for s in summaries], indent=2))
-    return folder / "study.md"
+    with atomic.atomic_folder(folder) as tmp:
+        (tmp / "study.md").write_text(text, encoding="utf-8")
+        (tmp / "study.json").write_text(json.dumps(
+            [{"case": s["case"]["name"], "site": s["site"]["name"], "results": s["results"],
+              "out_of_range": s.get("out_of_range", [])} for s in summaries], indent=2), encoding="utf-8")
+    return Path(folder) / "study.md"
 
 
 def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path = Path("results/study"), *,
@@ -52,22 +57,36 @@ def run_cases(case_files: list[Path], out: Path | None = None, study_out: Path =
     """
     from femstudy.casefile import check_references, load_case, with_overrides
     from femstudy.errors import require
+    from femstudy.study.femur import femur_spec
+    from femstudy.study.feasibility import preflight
     from femstudy.study.run import run_study
-    from femstudy.writable import require_writable_parent
+    from femstudy.writable import check_output_folder, require_free_space
 
     require(out is None or len(case_files) == 1, "--out names one results folder: give one case file")
-    require(mesh_size_mm is None or mesh_size_mm > 0, f"--mesh-size must be positive, got {mesh_size_mm}")
     cases = [load_case(path, bones_dir) for path in case_files]
-    if bone is not None:
-        cases = [with_overrides(case, {"drilling.bone": bone}) for case in cases]
+    overrides = {**({"drilling.bone": bone} if bone is not None else {}),
+                 **({"mesh.size_mm": mesh_size_mm} if mesh_size_mm is not None else {})}
+    if overrides:  # validated like the case files' own values
+        cases = [with_overrides(case, overrides) for case in cases]
         check_references(cases[0], bones_dir)
+    names = [case.name for case in cases]
+    twice = next((name for name in names if names.count(name) > 1), None)
+    require(twice is None, f"two of the cases are named '{twice}': their results would overwrite each other in "
+                           f"results/{twice}; give each case its own name")
     targets = [out or Path("results") / case.name for case in cases]
-    for target in targets:
-        require_writable_parent(target)
+    for case, target in zip(cases, targets):
+        surface = femur_spec(case).surface
+        check_output_folder(target, "results", inputs=[*case_files, *([surface] if surface else [])],
+                            cache_dir=cache_dir)
+        require_free_space(target, RESULTS_BYTES_WITH_FIELDS if case.output.fields else RESULTS_BYTES)
     if len(cases) > 1:
-        require_writable_parent(study_out)
-    results = [run_study(case, target, mesh_size_mm=mesh_size_mm, cache_dir=cache_dir, solver=solver,
-                         bones_dir=bones_dir, force=force, keep_solutions=keep_solutions, executor=executor)
+        check_output_folder(study_out, "the combined table", inputs=case_files, cache_dir=cache_dir)
+        require(Path(study_out).resolve() not in {Path(t).resolve() for t in targets},
+                f"--study-out {study_out} is also a case's results folder; name another")
+    for case in cases:  # every case's inputs judged before the first one runs
+        preflight(case, cache_dir, bones_dir, force)
+    results = [run_study(case, target, cache_dir=cache_dir, solver=solver, bones_dir=bones_dir, force=force,
+                         keep_solutions=keep_solutions, executor=executor)
                for case, target in zip(cases, targets)]
     table = write_study(study_out, [r.to_json() for r in results]) if len(results) > 1 else None
     return results, table

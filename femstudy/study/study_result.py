@@ -172,6 +172,9 @@ class StudyResult:
         When a results folder was written with pictures.
     out_dir : Path or None
         The results folder, when one was written.
+    out_of_range : tuple of dict
+        The plausibility gates the study failed and ran past with ``force``
+        (:mod:`femstudy.study.plausibility`; empty for a study in range).
     created_utc : str
     """
 
@@ -188,6 +191,7 @@ class StudyResult:
     created_utc: str
     figures: Figures | None = None
     out_dir: Path | None = None
+    out_of_range: tuple = ()
     package_versions: dict = field(default_factory=versions)
 
     def peak(self, quantity: str, loading: str = "dynamic"):
@@ -244,4 +248,5 @@ class StudyResult:
             out["hole"] = {**self.hole.to_json(), "convergence": self.convergence, "margins": margins}
         if self.figures is not None:
             out["figures"] = self.figures.as_dict()
+        out["out_of_range"] = list(self.out_of_range)
         return jsonable(out)

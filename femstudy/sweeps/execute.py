@@ -154,7 +154,7 @@ def _run_dask(todo, folder, evaluate, args, scheduler, finished) -> None:
         raise UserError("--scheduler needs dask.distributed: pip install 'femstudy[cluster]'") from None
     try:
         client = Client(scheduler, timeout="20s")
-    except (OSError, TimeoutError) as exc:
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
         raise UserError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
     total = len(finished) + len(todo)
     with client:

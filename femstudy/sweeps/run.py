@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,9 @@ from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.sweeps import report
 
 log = logging.getLogger(__name__)
+
+#: A Dask scheduler address: protocol://host:port (tcp, tls, ucx, ws, wss, inproc) or host:port.
+SCHEDULER_ADDRESS = re.compile(r"^(?:(?:tcp|tls|ucx|ws|wss)://)?\[?[A-Za-z0-9_.:-]+\]?:\d{1,5}/?$|^inproc://\S+$")
 
 #: Columns of a parameter sweep's table after the swept keys.
 STUDY_COLUMNS = ["mu_f", "mu_w", "peak_thrust_N", "peak_torque_Nmm", "max_deflection_mm_dynamic",
@@ -83,9 +87,12 @@ def sweep(file: Path, sizes: list[float] | None = None, *, order: str = "2", ref
     >>> result.convergence["P2-site"]["quantities"]["max_deflection_mm"]["verdict"]   # doctest: +SKIP
     'converged'
     """
-    require(Path(file).is_file(), f"{file} does not exist")
+    require(Path(file).is_file(), f"{file} does not exist" if not Path(file).is_dir() else
+            f"{file} is a folder; give a case file or a sweep file")
     require(workers >= 1, f"--workers must be at least 1, got {workers}")
     require(0 < target < 1, f"--target is a relative error in (0, 1), got {target}")
+    require(scheduler is None or SCHEDULER_ADDRESS.match(scheduler) is not None,
+            f"--scheduler '{scheduler}' is not a Dask scheduler address; give one like tcp://host:8786")
     try:
         is_sweep_file = "case" in tomllib.loads(Path(file).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError) as exc:
@@ -117,6 +124,20 @@ def _execute(points, case, case_path: Path, folder: Path, options: dict, runs=No
                    workers=options["workers"], scheduler=options["scheduler"], memory_bytes=memory)
 
 
+def _preflight(points, case, options: dict) -> None:
+    """Judge every point before the first one runs (femstudy.study.feasibility.preflight):
+    one impossible point refuses the sweep, naming it."""
+    from femstudy.casefile import with_overrides
+    from femstudy.study.feasibility import preflight
+
+    for point in points:
+        try:
+            preflight(with_overrides(case, point.overrides), options["cache_dir"], options["bones_dir"],
+                      forceable=False)
+        except UserError as exc:
+            raise UserError(f"sweep point {point.label}: {exc}") from None
+
+
 def _mesh_first(points, case, cache_dir: Path):
     """Build (or load) every point's mesh before solving, so memory is known from DOFs."""
     from femstudy.casefile import with_overrides
@@ -141,7 +162,8 @@ def _mesh_sweep(case_path: Path, sizes, order, refine, target, out, options) -> 
     orders = [1, 2] if order == "both" else [int(order)]
     refines = ["site", "uniform"] if refine == "both" else [refine]
     points = mesh_points(case, sizes, orders, refines)
-    folder = out or Path("results") / f"sweep-{case.name}"
+    _preflight(points, case, options)
+    folder = _claim(out or Path("results") / f"sweep-{case.name}", case_path, options)
     rows = [{"point": r["point"]["label"], **r["result"]} for r in _execute(points, case, case_path, folder, options)]
     assessment = report.convergence(rows, target)
     atomic.write_text(folder / "sweep.csv", report.table_csv(rows, report.MESH_COLUMNS))
@@ -158,6 +180,13 @@ def _mesh_sweep(case_path: Path, sizes, order, refine, target, out, options) -> 
     return SweepResult("mesh", rows, report.MESH_COLUMNS, assessment, folder, text)
 
 
+def _claim(folder: Path, case_path: Path, options: dict, *inputs) -> Path:
+    """The sweep's folder, checked and marked as femstudy's (it resumes: femstudy.writable.claim_folder)."""
+    from femstudy.writable import claim_folder
+
+    return claim_folder(folder, "the sweep", inputs=[case_path, *inputs], cache_dir=options["cache_dir"])
+
+
 def _parameter_sweep(path: Path, out, options) -> SweepResult:
     from femstudy.casefile import load_case, with_overrides
     from femstudy.sweeps.spec import read_parameter_sweep
@@ -166,7 +195,8 @@ def _parameter_sweep(path: Path, out, options) -> SweepResult:
     case = load_case(case_path, options["bones_dir"])
     for p in points:  # validate every point before any work
         with_overrides(case, p.overrides)
-    folder = out or Path("results") / f"sweep-{name}"
+    _preflight(points, case, options)
+    folder = _claim(out or Path("results") / f"sweep-{name}", case_path, options, path)
     records = _execute(points, case, case_path, folder, options, runs=str(folder / "runs"))
     keys = list(dict.fromkeys(k for r in records for k in r["point"]["overrides"]))
     rows = [{**r["point"]["overrides"], **r["result"]} for r in records]

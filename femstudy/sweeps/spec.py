@@ -31,6 +31,8 @@ import itertools
 from pathlib import Path
 from typing import Annotated
 
+import math
+
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from femstudy.casefile import Case, with_overrides
@@ -41,6 +43,12 @@ from femstudy.sweeps.execute import Point
 
 #: The remeshed point's envelope differs by this factor: a new TetWild run of the same request.
 REMESH_FACTOR = 1.000001
+#: Most points one sweep runs (each is a mesh or a whole study: seconds to minutes); a larger
+#: grid is refused before it is expanded. Split it into several sweeps.
+MAX_POINTS = 1000
+#: Fewest different sizes a convergence ladder needs: the observed order and the Richardson
+#: extrapolation take three (femstudy.sweeps.convergence).
+MIN_SIZES = 3
 
 
 def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list[str],
@@ -48,7 +56,14 @@ def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list
     """One point per (size, order, refinement); with ``remesh``, the middle size once more
     with its TetWild envelope changed by one part in a million, so that TetWild meshes the
     same request again: the two differ by the remeshing noise."""
-    require(len(sizes) > 0 and all(s > 0 for s in sizes), f"--sizes must be positive lengths in mm, got {sizes}")
+    require(len(sizes) > 0 and all(math.isfinite(s) and s > 0 for s in sizes),
+            f"--sizes must be positive lengths in mm, got {sizes}")
+    distinct = sorted(set(float(s) for s in sizes), reverse=True)
+    require(len(distinct) >= MIN_SIZES, f"a mesh-convergence sweep needs {MIN_SIZES} or more different sizes (the "
+                                        f"observed order and the extrapolation take three), got "
+                                        f"{', '.join(f'{s:g}' for s in distinct)} mm")
+    require(len(distinct) * len(orders) * len(refines) <= MAX_POINTS,
+            f"--sizes makes {len(distinct) * len(orders) * len(refines):,} points; a sweep runs at most {MAX_POINTS:,}")
     ratio = case.mesh.site_size_mm / case.mesh.size_mm
     envelope_per_mm = case.mesh.envelope / case.mesh.size_mm
     ladder = sorted(set(sizes), reverse=True)
@@ -95,6 +110,11 @@ def read_parameter_sweep(path: Path) -> tuple[str, Path, list[Point]]:
         raise UserError(f"cannot read sweep file {path}: {exc}") from None
     doc = parse_toml(text, SweepFile, str(path))
     case_path = (path.parent / doc.case).resolve()
+    count = (math.prod(len(v) for v in doc.grid.values()) if doc.grid else 0) + len(doc.point)
+    require(count <= MAX_POINTS, f"sweep file {path} makes {count:,} points ("
+                                 + " x ".join(str(len(v)) for v in doc.grid.values())
+                                 + (f" + {len(doc.point)}" if doc.point else "")
+                                 + f"); a sweep runs at most {MAX_POINTS:,}: split it into several sweeps")
     points = []
     keys = list(doc.grid)
     for combo in itertools.product(*(doc.grid[k] for k in keys)) if keys else []:

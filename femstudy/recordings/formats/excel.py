@@ -9,6 +9,8 @@ Metadata are the header block's rows and the ``key | value`` rows of a sheet nam
 
 from __future__ import annotations
 
+import logging
+import time
 from pathlib import Path
 
 import numpy as np
@@ -20,21 +22,71 @@ from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, plain_value
 from femstudy.recordings.units import is_units_row
 
+log = logging.getLogger(__name__)
+
 ZIP_SIGNATURE = b"PK\x03\x04"
 DATA_SHEETS = ("recording", "data")
 METADATA_SHEET = "metadata"
+#: Rows and columns read from a sheet at most: a recording's samples (femstudy's limit,
+#: femstudy.recordings.reader.MAX_SAMPLES) plus a header, and far more columns than channels.
+MAX_ROWS = 25_000_000 + 1000
+MAX_COLUMNS = 256
+#: Rows between progress reports, and the longest a sheet may take to read [s].
+PROGRESS_ROWS = 100_000
+READ_TIME_LIMIT_S = 120.0
+#: Largest uncompressed content of a workbook [bytes] (1 GiB, the limit on a recording file).
+MAX_UNCOMPRESSED_BYTES = 1 << 30
+
+
+def _check_archive(path: Path, source: str) -> None:
+    """Refuse a workbook whose parts would unpack to more than :data:`MAX_UNCOMPRESSED_BYTES`
+    (a zip bomb), before openpyxl unpacks anything."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as book:
+            size = sum(info.file_size for info in book.infolist())
+    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({type(exc).__name__}: "
+                        f"{exc})") from None
+    if size > MAX_UNCOMPRESSED_BYTES:
+        raise UserError(f"recording {source} unpacks to {size / 2 ** 30:.1f} GiB; femstudy reads workbooks of up to "
+                        f"{MAX_UNCOMPRESSED_BYTES / 2 ** 30:.0f} GiB unpacked: export the recording as CSV and split it")
+
+
+def _sheet_rows(ws, source: str) -> list[list]:
+    """The rows of a read-only sheet as they are in the file. The sheet's ``dimension`` claim
+    is dropped first: openpyxl pads every row to the claimed width and height, and a 1.5 kB
+    file claiming a million rows by 16,384 columns would fill memory."""
+    ws.reset_dimensions()
+    rows, start = [], time.monotonic()
+    for row in ws.iter_rows(values_only=True):
+        if len(rows) >= MAX_ROWS:
+            raise UserError(f"recording {source}: sheet '{ws.title}' has more than {MAX_ROWS:,} rows; femstudy reads "
+                            "recordings of up to 25 million samples: split it")
+        rows.append(list(row[:MAX_COLUMNS]))
+        if len(rows) % PROGRESS_ROWS == 0:
+            log.info("read %d rows of %s", len(rows), source,
+                     extra={"progress": (f"reading {source}", len(rows), None)})
+            if time.monotonic() - start > READ_TIME_LIMIT_S:
+                raise UserError(f"reading recording {source} took longer than {READ_TIME_LIMIT_S:g} s "
+                                f"({len(rows):,} rows read); export it as CSV, which reads in seconds")
+    if len(rows) >= PROGRESS_ROWS:
+        log.info("read %s", source, extra={"progress": (f"reading {source}", None, None)})
+    return rows
 
 
 def read_table(path: Path, source: str) -> Table:
     """An .xlsx recording as a :class:`Table` (see the module docstring)."""
     import openpyxl
 
+    _check_archive(path, source)
     try:
         with path.open("rb") as stream:  # a stream, so that openpyxl does not insist on the suffix
             book = openpyxl.load_workbook(stream, read_only=True, data_only=True)
-            sheets = {ws.title: [list(row) for row in ws.iter_rows(values_only=True)] for ws in book.worksheets}
+            sheets = {ws.title: _sheet_rows(ws, source) for ws in book.worksheets}
             book.close()
-    except OSError:
+    except (OSError, UserError):
         raise
     except Exception as exc:  # openpyxl raises BadZipFile, KeyError, InvalidFileException ... on a damaged file
         raise UserError(f"recording {source} is not a readable Excel .xlsx workbook ({type(exc).__name__}: "

@@ -21,6 +21,8 @@ from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, plain_value
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+#: Largest variable read [elements]: femstudy's limit on samples (25 million) times a few channels.
+MAX_VARIABLE_ELEMENTS = 100_000_000
 #: MATLAB v7.3 files are HDF5 files behind a 512-byte text header
 USER_BLOCK = 512
 
@@ -37,11 +39,13 @@ def read_table(path: Path, source: str) -> Table:
     hdf5 = head.startswith(HDF5_SIGNATURE) or head[USER_BLOCK:USER_BLOCK + 8] == HDF5_SIGNATURE
     variables = _read_hdf5(path, source) if hdf5 else _read_classic(path, source)
     columns = {k: v for k, v in variables.items()
-               if isinstance(v, np.ndarray) and v.dtype.kind in "fiub" and v.ndim == 1 and v.size > 1}
-    matrices = [k for k, v in variables.items() if isinstance(v, np.ndarray) and v.ndim == 2 and v.dtype.kind in "fiu"]
-    hint = f"; save the columns of {matrices[0]} as vectors" if matrices else ""
-    require(columns, f"recording {source} (MATLAB) has no numeric vector variables; femstudy needs one "
-                     f"per column, e.g. t, Fz and Mz (variables found: {', '.join(variables) or 'none'}){hint}")
+               if isinstance(v, np.ndarray) and v.dtype.kind in "fiubc" and v.ndim >= 1 and v.size > 1}
+    vectors = [k for k, v in columns.items() if v.ndim == 1 and v.dtype.kind != "c"]
+    odd = [f"{k} ({_what(v)})" for k, v in columns.items() if k not in vectors]
+    hint = f"; save {odd[0].split(' (')[0]} as real vectors, one per channel" if odd else ""
+    require(vectors, f"recording {source} (MATLAB) has no real numeric vector variables; femstudy needs one per "
+                     f"column, e.g. t, Fz and Mz (variables found: "
+                     f"{', '.join(odd or list(variables)) or 'none'}){hint}")
     units_struct = variables.get("units") if isinstance(variables.get("units"), dict) else {}
     metadata, origins = {}, {}
     for key, value in variables.items():
@@ -55,9 +59,33 @@ def read_table(path: Path, source: str) -> Table:
     names = list(columns)
     units = [str(_metadata_value(units_struct[n])) if n in units_struct else None for n in names]
     return Table(names=names, units=units, metadata=metadata, origins=origins,
-                 load=lambda indices: [np.asarray(columns[names[k]], dtype=float) for k in indices],
+                 load=lambda indices: _load(columns, [names[k] for k in indices], source),
                  where=lambda row: f"sample {row + 1}", how_to_add="add a variable {key} (or metadata.{key})",
                  word="variable")
+
+
+def _what(value: np.ndarray) -> str:
+    """What keeps a numeric variable from being a channel: complex values, or a matrix shape."""
+    if value.dtype.kind == "c":
+        return "complex"
+    return f"a {' x '.join(str(n) for n in value.shape)} matrix"
+
+
+def _load(columns: dict, used: list[str], source: str) -> list[np.ndarray]:
+    """The used variables as float vectors: each real and one-dimensional, all of one length."""
+    out = []
+    for name in used:
+        value = columns[name]
+        if value.dtype.kind == "c" or value.ndim != 1:
+            raise UserError(f"recording {source}: variable {name} is {_what(value)}; femstudy reads each channel "
+                            f"as a real vector (save {'its real part' if value.dtype.kind == 'c' else 'its columns as vectors'})")
+        out.append(np.asarray(value, dtype=float))
+    lengths = {name: len(v) for name, v in zip(used, out)}
+    if len(set(lengths.values())) > 1:
+        listed = ", ".join(f"{name} {n:,}" for name, n in lengths.items())
+        raise UserError(f"recording {source}: its variables differ in length ({listed} samples); every channel "
+                        "needs one value per time sample")
+    return out
 
 
 def _is_scalar(value) -> bool:
@@ -72,9 +100,26 @@ def _metadata_value(value):
     return plain_value(value)
 
 
+def _check_sizes(shapes, source: str) -> None:
+    """Refuse a variable whose header announces more than :data:`MAX_VARIABLE_ELEMENTS`
+    values, before they are allocated (compressed or unwritten data can claim any size)."""
+    for name, shape in shapes:
+        elements = int(np.prod([int(n) for n in shape], dtype=float)) if len(shape) else 1
+        if elements > MAX_VARIABLE_ELEMENTS:
+            raise UserError(f"recording {source}: variable {name} announces {elements:,} values "
+                            f"({' x '.join(str(n) for n in shape)}); femstudy reads at most {MAX_VARIABLE_ELEMENTS:,} "
+                            "per variable: split the recording")
+
+
 def _read_classic(path: Path, source: str) -> dict:
     import scipy.io
 
+    try:
+        _check_sizes([(name, shape) for name, shape, _ in scipy.io.whosmat(path)], source)
+    except UserError:
+        raise
+    except Exception:  # noqa: BLE001 - a damaged file: loadmat below reports it
+        pass
     try:
         data = scipy.io.loadmat(path, squeeze_me=True, simplify_cells=True)
     except Exception as exc:  # scipy raises ValueError, TypeError, MatReadError ... on a damaged file
@@ -89,6 +134,10 @@ def _read_hdf5(path: Path, source: str) -> dict:
 
     try:
         with h5py.File(path, "r") as f:
+            shapes = []
+            f.visititems(lambda name, node: shapes.append((name, node.shape))
+                         if isinstance(node, h5py.Dataset) and node.shape is not None else None)
+            _check_sizes(shapes, source)
             return {name: value for name, value in ((n, _hdf5_variable(f[n])) for n in f if not n.startswith("#"))
                     if value is not None}
     except (OSError, KeyError, ValueError) as exc:
@@ -104,16 +153,25 @@ def _hdf5_variable(node):
         if matlab_class != "struct":
             return None
         return {k: v for k, v in ((k, _hdf5_variable(node[k])) for k in node) if v is not None}
+    names = node.dtype.names or ()
+    if node.dtype.kind == "V" and {"real", "imag"} <= set(names):  # MATLAB's complex: a compound
+        raw = np.asarray(node[()])
+        return _shaped(raw["real"] + 1j * raw["imag"])
     if node.dtype.kind not in "fiub":
-        return None  # cell arrays (references), compound types: not used
+        return None  # cell arrays (references), other compound types: not used
     if node.attrs.get("MATLAB_empty", 0):
         return "" if matlab_class == "char" else np.empty(0)
-    values = np.asarray(node[()]).ravel()
+    values = _shaped(np.asarray(node[()]))
     if matlab_class == "char":
-        return "".join(chr(c) for c in values)
+        return "".join(chr(c) for c in values.ravel())
     if values.size == 1:
-        return bool(values[0]) if matlab_class == "logical" else values[0].item()
+        return bool(values.ravel()[0]) if matlab_class == "logical" else values.ravel()[0].item()
     return values
+
+
+def _shaped(values: np.ndarray) -> np.ndarray:
+    """A MATLAB array as a vector when it is one (1 x n or n x 1), else as it is."""
+    return values.ravel() if values.ndim <= 1 or sum(n > 1 for n in values.shape) <= 1 else values
 
 
 # -- writing ----------------------------------------------------------------------------------

@@ -10,6 +10,8 @@ property wins). Lists, which TDMS properties cannot hold, are written as TOML te
 
 from __future__ import annotations
 
+import contextlib
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -25,12 +27,28 @@ MAGIC = b"TDSm"
 GROUP = "recording"
 
 
+@contextlib.contextmanager
+def quiet_nptdms():
+    """Silence npTDMS's own warnings (it sets its loggers' levels itself): a damaged segment
+    is reported by femstudy in one line (channels of different lengths, a truncated file)."""
+    loggers = [logging.getLogger(name) for name in list(logging.root.manager.loggerDict) if name.startswith("nptdms")]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels):
+            logger.setLevel(level)
+
+
 def read_table(path: Path, source: str) -> Table:
     """A TDMS recording as a :class:`Table` (see the module docstring)."""
     from nptdms import TdmsFile
 
     try:
-        tdms = TdmsFile.read(path)
+        with quiet_nptdms():
+            tdms = TdmsFile.read(path)
     except Exception as exc:  # npTDMS raises ValueError, KeyError, struct.error ... on a damaged file
         raise UserError(f"recording {source} is not a readable TDMS file ({type(exc).__name__}: {exc})") from None
     channels = [channel for group in tdms.groups() for channel in group.channels()]

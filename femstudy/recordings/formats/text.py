@@ -18,7 +18,10 @@ lines, a channel-name row and a units row.
 from __future__ import annotations
 
 import io
+import itertools
+import logging
 import re
+import time
 import tomllib
 import warnings
 from dataclasses import dataclass
@@ -36,7 +39,13 @@ from femstudy.recordings.formats.table import Table
 from femstudy.recordings.metadata import format_header_value, parse_text_value
 from femstudy.recordings.units import is_units_row
 
+log = logging.getLogger(__name__)
+
 MAX_HEADER_BYTES = 64 * 1024
+#: Data lines parsed at a time; after each block the progress is reported.
+CHUNK_ROWS = 1_000_000
+#: Longest a recording's values may take to read [s] (25 million rows take about 30 s).
+READ_TIME_LIMIT_S = 120.0
 DELIMITERS = ("\t", ";", ",")
 #: lines looked at after the first data row to tell a decimal comma
 DECIMAL_SNIFF_LINES = 200
@@ -189,15 +198,34 @@ def _data_lines(path: Path, layout: Layout) -> Iterator[str]:
 
 
 def _load(path: Path, layout: Layout, indices: list[int], source: str) -> list[np.ndarray]:
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked later
-            data = np.loadtxt(_data_lines(path, layout), delimiter=layout.delimiter, usecols=indices,
-                              ndmin=2, comments="#", dtype=float)
-    except ValueError:
-        raise UserError(_first_bad_line(path, layout, indices, source)) from None
-    if data.size == 0:
+    """The used columns, read :data:`CHUNK_ROWS` lines at a time: a long file reports its
+    progress (a bar on a terminal), and one whose reading takes longer than
+    :data:`READ_TIME_LIMIT_S` (a slow network drive, say) is stopped with one line."""
+    total, done, start = max(path.stat().st_size, 1), 0, time.monotonic()
+    lines, blocks = _data_lines(path, layout), []
+    while block := list(itertools.islice(lines, CHUNK_ROWS)):
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked later
+                data = np.loadtxt(block, delimiter=layout.delimiter, usecols=indices, ndmin=2, comments="#",
+                                  dtype=float)
+        except ValueError:
+            raise UserError(_first_bad_line(path, layout, indices, source)) from None
+        if data.size:
+            blocks.append(data)
+        done += sum(map(len, block))
+        seconds = time.monotonic() - start
+        if len(block) == CHUNK_ROWS or blocks[:-1]:
+            log.info("read %.0f %% of %s", min(100.0, 100.0 * done / total), source,
+                     extra={"progress": (f"reading {source}", min(done, total), total)})
+        if seconds > READ_TIME_LIMIT_S:
+            raise UserError(f"reading recording {source} took longer than {READ_TIME_LIMIT_S:g} s "
+                            f"({100.0 * done / total:.0f} % read); copy it to a local disk, or split it")
+    if len(blocks) > 1 or done >= CHUNK_ROWS:
+        log.info("read %s", source, extra={"progress": (f"reading {source}", None, None)})
+    if not blocks:
         return [np.empty(0) for _ in indices]
+    data = np.concatenate(blocks) if len(blocks) > 1 else blocks[0]
     return [data[:, k] for k in range(len(indices))]
 
 
