@@ -79,7 +79,7 @@ def test_overrides_are_validated_like_the_file():
     assert changed.drilling.feed_mm_s == 1.5 and changed.site.direction == "lateral"
     with pytest.raises(UserError, match="did you mean 'drilling.feed_mm_s'"):
         with_overrides(case, {"drilling.feed": 1.5})
-    with pytest.raises(UserError, match="drilling.feed_mm_s: Input should be greater than 0"):
+    with pytest.raises(UserError, match="drilling.feed_mm_s: Input should be greater than or equal to 0.01"):
         with_overrides(case, {"drilling.feed_mm_s": -1})
 
 

@@ -276,7 +276,7 @@ def test_bad_binary_and_spreadsheet_files(tmp_path):
         "ragged.tdms": "its channels differ in length ('Time' 600 samples, 'Fz' 595 samples)",
         "scalars.mat": "(MATLAB) has no numeric vector variables; femstudy needs one per column, e.g. t, Fz and Mz "
                        "(variables found: feed_mm_s, spindle_rpm)",
-        "matrix.mat": "(variables found: data, feed_mm_s); save the columns of data as vectors",
+        "matrix.mat": "(variables found: data (a 600 x 3 matrix), feed_mm_s); save the columns of data as vectors",
         "words.xlsx": "sheet 'Sheet' has no row of numbers",
         "hole.xlsx": "hole.xlsx, row 5: an empty cell in column 'thrust [N]' is not a number",
         "fake.xlsx": "has a .xlsx name but is not an Excel .xlsx workbook",
