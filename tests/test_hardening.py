@@ -340,6 +340,19 @@ def test_a_recording_with_a_dead_or_absurd_channel_is_refused(work, capsys, chan
     assert not (work / "d.json").exists()
 
 
+def test_a_diagnosis_that_is_no_result_is_refused(work, capsys):
+    """A torque that varies by a nanonewton-millimetre passes the dead-channel check, and its
+    fit's R² comes to -1e31: that is refused, not printed as a diagnosis."""
+    rec = synthetic(work / "rec.csv", capsys, "--approach-s", "0.5")
+    lines = rec.read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.startswith("time_s"))
+    body = [",".join(line.split(",")[:2] + [f"{3.5 + 1e-9 * (k % 2):.12f}"]) for k, line in enumerate(lines[first + 1:])]
+    rec.write_text("\n".join(lines[: first + 1] + body) + "\n")
+    refused(["diagnose", rec, "--model", "allotta", "--json", work / "d.json"], capsys, "which is no result",
+            limit_s=300)  # judged after the diagnosis
+    assert not (work / "d.json").exists()
+
+
 def test_a_recording_too_long_to_diagnose_is_refused_before_it_is_read(work, capsys):
     """10 million rows: read in 10 s, then the diagnosis ran past 600 s. Its lines are counted
     first (1.1 million here, 14 MB) and it is refused in a second or two."""
