@@ -386,6 +386,18 @@ def test_a_long_text_read_reports_progress_and_stops_at_its_time_limit(work, cap
         read_recording(rec)
 
 
+@pytest.mark.parametrize("force, exponent, expect", [
+    ("1e308", "0.4", "initial_force_N = 1e+308 is not a drilling force"),
+    ("nan", "0.4", "initial_force_N = nan is not a drilling force"),
+    ("20", "inf", "growth_exponent_p = inf is not a growth exponent"),
+])
+def test_a_table_of_trials_with_impossible_values_is_refused(work, capsys, force, exponent, expect):
+    """``femstudy normality`` printed mean nan, sd inf at exit 0 for such a table."""
+    rows = "".join(f"{20 + k},{0.4 + 0.01 * k}\n" for k in range(5))
+    (work / "trials.csv").write_text(f"initial_force_N,growth_exponent_p\n{rows}{force},{exponent}\n")
+    refused(["normality", work / "trials.csv"], capsys, expect)
+
+
 def test_sweeps_are_judged_whole_before_the_first_point(work, capsys):
     case = case_file(work, "case")
     grid = ", ".join(f"{1.8 + k * 1e-4:.4f}" for k in range(1000))
