@@ -500,6 +500,15 @@ def test_any_number_on_the_command_line_gives_a_result_or_one_line(option, value
         assert len([line for line in err.getvalue().splitlines() if "error" in line]) == 1
 
 
+def test_load_histories_no_drill_exerts_are_refused(work, capsys):
+    """``femstudy loads`` drew the human law's 1.1e15 N at 3 mm/s; now it refuses, and a feed
+    of 30 mm per turn before computing anything."""
+    refused(["loads", "--feed", "3", "--rpm", "1500", "--bone", "human", "--csv", work / "l.csv"], capsys,
+            "the clogging model's thrust reaches 1.1e+15 N")
+    refused(["loads", "--feed", "50", "--rpm", "100"], capsys, "advances the drill 30 mm per turn")
+    assert not (work / "l.csv").exists()
+
+
 def test_a_lane_that_dies_is_named_with_its_signal():
     from femstudy.errors import environment_message
     from femstudy.lanes import LaneFailed, Lanes, can_fork
