@@ -22,10 +22,12 @@ MAX_MAGNITUDE = {"thrust": 1e4, "torque": 1e5, "fx": 1e4, "fy": 1e4, "depth": 1e
 UNIT_WORDS = {"thrust": "N", "torque": "N·mm", "fx": "N", "fy": "N", "depth": "mm"}
 
 
-def check_values(rec, where: Callable[[int], str], columns: Mapping[str, tuple[str, str]]) -> None:
+def check_values(rec, where: Callable[[int], str], columns: Mapping[str, tuple[str, str]],
+                 hint: str = "is the column's unit right?") -> None:
     """Raise :class:`UserError` for a channel beyond :data:`MAX_MAGNITUDE` or a constant
     torque; ``where(row)`` names a row in the
-    file's terms, ``columns`` maps a quantity to its column's (name, unit) as written."""
+    file's terms, ``columns`` maps a quantity to its column's (name, unit) as written, ``hint``
+    says what to look at."""
     name = rec.name
     for quantity, values in (("thrust", rec.thrust_N), ("torque", rec.torque_Nmm), ("depth", rec.depth_mm),
                              ("fx", rec.fx_N), ("fy", rec.fy_N)):
@@ -36,7 +38,7 @@ def check_values(rec, where: Callable[[int], str], columns: Mapping[str, tuple[s
         if abs(values[row]) > MAX_MAGNITUDE[quantity]:
             raise UserError(f"recording {name}: {label} reaches {values[row]:.3g} {UNIT_WORDS[quantity]} at {where(row)}; "
                             f"a drilling recording stays within ±{MAX_MAGNITUDE[quantity]:g} {UNIT_WORDS[quantity]} "
-                            f"(is the column's unit right?)")
+                            f"({hint})")
         if quantity == "torque" and np.ptp(values) == 0:
             raise UserError(f"recording {name}: {label} is constant ({values[0]:g} {UNIT_WORDS[quantity]}), so its "
                             f"sensor recorded nothing; remove the column, or name the right one with --columns "
