@@ -21,6 +21,7 @@ import os
 import sys
 import time
 import traceback
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -123,6 +124,9 @@ def main(argv: list[str] | None = None) -> int:
             parser.print_help()
             return 2
         args.settings = settings = Settings.from_environment()
+        # numpy's floating-point RuntimeWarnings are two lines each of library internals; what
+        # they warn of (an overflow, a NaN) is judged by femstudy's own checks (docs/checks.md)
+        warnings.simplefilter("ignore", RuntimeWarning)
         name_mkl_library()
         console.install(quiet=getattr(args, "quiet", False))
         return int(args.run(args) or 0)

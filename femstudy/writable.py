@@ -69,8 +69,8 @@ def check_output_folder(target: str | os.PathLike, what: str = "results", *, inp
                         cache_dir: str | os.PathLike | None = None) -> None:
     """Raise :class:`UserError`, before any work, unless femstudy may write the folder
     ``target``: replaceable (:func:`check_replaceable_folder`), not holding one of ``inputs``
-    (files or folders read), neither the cache folder, inside it, nor holding it, and in a
-    writable place."""
+    (files or folders read), neither the cache folder, inside it (unless the working folder
+    is), nor holding it, and in a writable place."""
     target = Path(target)
     where = f"cannot write {what} to {target}"
     _not_the_working_folder(target, where)
@@ -82,7 +82,9 @@ def check_output_folder(target: str | os.PathLike, what: str = "results", *, inp
                             "would replace; name a new folder")
     if cache_dir is not None:
         cache = _resolved(Path(cache_dir))
-        if resolved == cache or resolved in cache.parents or cache in resolved.parents:
+        cwd = _resolved(Path.cwd())
+        inside = cache in resolved.parents and not (cache == cwd or cache in cwd.parents)
+        if resolved == cache or resolved in cache.parents or inside:  # inside: unless one works in the cache
             relation = ("the mesh cache" if resolved == cache else
                         "inside the mesh cache" if cache in resolved.parents else "a folder holding the mesh cache")
             raise UserError(f"{where}: it is {relation} ({cache_dir}); name a folder outside it")

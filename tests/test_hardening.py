@@ -340,6 +340,19 @@ def test_a_recording_with_a_dead_or_absurd_channel_is_refused(work, capsys, chan
     assert not (work / "d.json").exists()
 
 
+def test_a_diagnosis_that_is_no_result_is_refused(work, capsys):
+    """A torque that varies by a nanonewton-millimetre passes the dead-channel check, and its
+    fit's R² comes to -1e31: that is refused, not printed as a diagnosis."""
+    rec = synthetic(work / "rec.csv", capsys, "--approach-s", "0.5")
+    lines = rec.read_text().splitlines()
+    first = next(k for k, line in enumerate(lines) if line.startswith("time_s"))
+    body = [",".join(line.split(",")[:2] + [f"{3.5 + 1e-9 * (k % 2):.12f}"]) for k, line in enumerate(lines[first + 1:])]
+    rec.write_text("\n".join(lines[: first + 1] + body) + "\n")
+    refused(["diagnose", rec, "--model", "allotta", "--json", work / "d.json"], capsys, "which is no result",
+            limit_s=300)  # judged after the diagnosis
+    assert not (work / "d.json").exists()
+
+
 def test_a_recording_too_long_to_diagnose_is_refused_before_it_is_read(work, capsys):
     """10 million rows: read in 10 s, then the diagnosis ran past 600 s. Its lines are counted
     first (1.1 million here, 14 MB) and it is refused in a second or two."""
@@ -371,6 +384,18 @@ def test_a_long_text_read_reports_progress_and_stops_at_its_time_limit(work, cap
     monkeypatch.setattr(text, "READ_TIME_LIMIT_S", -1.0)
     with pytest.raises(UserError, match=r"reading recording rec.csv took longer than -1 s"):
         read_recording(rec)
+
+
+@pytest.mark.parametrize("force, exponent, expect", [
+    ("1e308", "0.4", "initial_force_N = 1e+308 is not a drilling force"),
+    ("nan", "0.4", "initial_force_N = nan is not a drilling force"),
+    ("20", "inf", "growth_exponent_p = inf is not a growth exponent"),
+])
+def test_a_table_of_trials_with_impossible_values_is_refused(work, capsys, force, exponent, expect):
+    """``femstudy normality`` printed mean nan, sd inf at exit 0 for such a table."""
+    rows = "".join(f"{20 + k},{0.4 + 0.01 * k}\n" for k in range(5))
+    (work / "trials.csv").write_text(f"initial_force_N,growth_exponent_p\n{rows}{force},{exponent}\n")
+    refused(["normality", work / "trials.csv"], capsys, expect)
 
 
 def test_sweeps_are_judged_whole_before_the_first_point(work, capsys):
@@ -473,6 +498,15 @@ def test_any_number_on_the_command_line_gives_a_result_or_one_line(option, value
     assert "Traceback" not in err.getvalue()
     if code == 2:
         assert len([line for line in err.getvalue().splitlines() if "error" in line]) == 1
+
+
+def test_load_histories_no_drill_exerts_are_refused(work, capsys):
+    """``femstudy loads`` drew the human law's 1.1e15 N at 3 mm/s; now it refuses, and a feed
+    of 30 mm per turn before computing anything."""
+    refused(["loads", "--feed", "3", "--rpm", "1500", "--bone", "human", "--csv", work / "l.csv"], capsys,
+            "the clogging model's thrust reaches 1.1e+15 N")
+    refused(["loads", "--feed", "50", "--rpm", "100"], capsys, "advances the drill 30 mm per turn")
+    assert not (work / "l.csv").exists()
 
 
 def test_a_lane_that_dies_is_named_with_its_signal():

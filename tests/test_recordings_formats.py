@@ -277,9 +277,9 @@ def test_bad_binary_and_spreadsheet_files(tmp_path):
         "no_thrust.tdms": "has no thrust_N channel (newtons), nor another thrust channel (fz, thrust) with a unit; "
                           "its channels are: Time, Mz",
         "ragged.tdms": "its channels differ in length ('Time' 600 samples, 'Fz' 595 samples)",
-        "scalars.mat": "(MATLAB) has no real numeric vector variables; femstudy needs one per column, e.g. t, Fz and Mz "
+        "scalars.mat": "(MATLAB) has no numeric vector variables; femstudy needs one per column, e.g. t, Fz and Mz "
                        "(variables found: feed_mm_s, spindle_rpm)",
-        "matrix.mat": "(variables found: data (a 600 x 3 matrix)); save data as real vectors, one per channel",
+        "matrix.mat": "(variables found: data (a 600 x 3 matrix), feed_mm_s); save the columns of data as vectors",
         "words.xlsx": "sheet 'Sheet' has no row of numbers",
         "hole.xlsx": "hole.xlsx, row 5: an empty cell in column 'thrust [N]' is not a number",
         "fake.xlsx": "has a .xlsx name but is not an Excel .xlsx workbook",

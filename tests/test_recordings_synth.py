@@ -139,8 +139,8 @@ def test_cli_writes_a_readable_recording_and_a_dataset(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--pulsation", "1.5"], "feed pulsation amplitude must lie in [0, 1)"),
     (["--ripple", "-0.1"], "--ripple must be >= 0"),
-    (["--feed", "0"], "feed must be a positive"),
-    (["--rate-hz", "50"], "sample rate must lie in 100 Hz-10 kHz"),
+    (["--feed", "0"], "argument --feed: 0 mm/s is out of range: expected at least 0.01"),
+    (["--rate-hz", "50"], "argument --rate-hz: 50 Hz is out of range: expected at least 100 and at most 10000 Hz"),
     (["--bone", "goat"], "unknown bone coefficient set 'goat'"),
 ])
 def test_cli_bad_options_exit_2_and_write_nothing(tmp_path, args, message):

@@ -9,7 +9,7 @@ from pathlib import Path
 from femstudy.commands.metadata import add_metadata_options, parse_settings
 from femstudy.commands.options import number
 from femstudy.drilling import registry
-from femstudy.errors import require
+from femstudy.errors import UserError, require
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -65,7 +65,28 @@ def run(args: argparse.Namespace) -> int:
     d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
                  columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
                  bone_library=args.settings.bones_dir, workers=args.workers)
+    _require_finite(d.to_json(), args.recording.name)
     print(d.summary())
     for path in d.write(args.json, args.plot, args.report):
         print(f"wrote {path}")
     return 0
+
+
+#: An R² below this is no fit but a channel without variation (a residual a million times
+#: its variance).
+LOWEST_R2 = -1e6
+
+
+def _require_finite(doc: dict, name: str) -> None:
+    """Refuse a diagnosis holding a number that is not finite, or an R² below
+    :data:`LOWEST_R2` (a channel without variation makes both): it would be printed and
+    written as if it meant something."""
+    import math
+
+    from femstudy.study.plausibility import numbers_in
+
+    for path, value in numbers_in(doc):
+        if not math.isfinite(value) or (path[-1].startswith("r2") and value < LOWEST_R2):
+            where = ".".join(p for p in path)
+            raise UserError(f"the diagnosis of {name} came to {where} = {value}, which is no result: a channel of "
+                            "the recording or the simulation hardly varies; check them")

@@ -55,8 +55,14 @@ def run(args: argparse.Namespace) -> int:
     from femstudy.recordings.dataset import write_dataset, write_synthetic
     from femstudy.recordings.synthetic import Effects
 
+    from femstudy.casefile import MAX_FEED_PER_REV_MM
+    from femstudy.errors import require
     from femstudy.writable import check_output_file, check_output_folder
 
+    turn_mm = 60.0 * args.feed / args.rpm
+    require(turn_mm <= MAX_FEED_PER_REV_MM, f"--feed {args.feed:g} mm/s at --rpm {args.rpm:g} advances the drill "
+                                            f"{turn_mm:.3g} mm per turn; a twist drill cuts at most "
+                                            f"{MAX_FEED_PER_REV_MM:g} mm per turn (surgical drilling: 0.01-0.2 mm)")
     if args.dataset:
         check_output_folder(args.dataset, "the data set", cache_dir=args.settings.cache_dir)
         print(write_dataset(args.dataset, bone=args.bone, replicates=args.replicates, outliers=args.outliers,

@@ -201,9 +201,13 @@ def write_synthetic(path, *, format: str | None = None, time_unit: str = "s", fo
     """
     from dataclasses import replace
 
+    from femstudy.recordings.ranges import check_values
+
     require(plot is None or Path(plot).suffix.lower() in (".png", ".pdf", ".svg"),
             f"--plot must end in .png, .pdf or .svg, got '{plot}'")
     rec = synthesize(**conditions)
+    check_values(replace(rec, source=str(path)), lambda row: f"sample {row + 1}", {},  # what no drill records
+                 "the friction law or the energies are outside what the models describe here")
     write_recording(path, rec, torque_unit, format=format, time_unit=time_unit, force_unit=force_unit)
     m = rec.metadata
     summary = (f"wrote {path}: {rec.time_s.size} samples, {rec.duration_s:.2f} s; model {m['model']}, "

@@ -159,10 +159,22 @@ def appendix_b() -> tuple[np.ndarray, np.ndarray]:
             np.array([float(r["initial_force_N"]) for r in rows]))
 
 
-def read_trials(path) -> tuple[list[float], list[float]]:
-    """(p, F_o) from a CSV; rows whose 'role' is outlier or validation are skipped."""
-    import csv
+#: What a trial's fit can be: F_o a drilling force (0, 10 kN] (femstudy.recordings.ranges),
+#: p finite and at most 100 per mm in size (the thesis's thirty trials: 0.29-0.65); a trials
+#: file is a short table (at most 16 MB).
+MAX_INITIAL_FORCE_N, MAX_GROWTH_EXPONENT, MAX_TRIALS_BYTES = 1e4, 100.0, 16 << 20
 
+
+def read_trials(path) -> tuple[list[float], list[float]]:
+    """(p, F_o) from a CSV; rows whose 'role' is outlier or validation are skipped. Values
+    must be finite and in range (:data:`MAX_INITIAL_FORCE_N`, :data:`MAX_GROWTH_EXPONENT`)."""
+    import csv
+    import math
+
+    path = Path(path)
+    require(path.is_file(), f"{path} is not a file" if path.exists() else f"{path} does not exist")
+    require(path.stat().st_size <= MAX_TRIALS_BYTES, f"{path} is {path.stat().st_size:,} bytes; a table of trials "
+                                                     f"is at most {MAX_TRIALS_BYTES >> 20} MB")
     try:
         lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
     except (OSError, UnicodeDecodeError) as exc:
@@ -172,9 +184,16 @@ def read_trials(path) -> tuple[list[float], list[float]]:
             f"{path} needs columns initial_force_N and growth_exponent_p")
     rows = [r for r in rows if r.get("role", "calibration") in ("calibration", "held out")]
     try:
-        return [float(r["growth_exponent_p"]) for r in rows], [float(r["initial_force_N"]) for r in rows]
-    except ValueError as exc:
+        p, force = [float(r["growth_exponent_p"]) for r in rows], [float(r["initial_force_N"]) for r in rows]
+    except (ValueError, TypeError) as exc:
         raise UserError(f"{path}: {exc}") from None
+    for k, (pk, fk) in enumerate(zip(p, force)):
+        require(math.isfinite(fk) and 0 < fk <= MAX_INITIAL_FORCE_N,
+                f"{path}, row {k + 2}: initial_force_N = {fk:g} is not a drilling force (0-{MAX_INITIAL_FORCE_N:g} N)")
+        require(math.isfinite(pk) and abs(pk) <= MAX_GROWTH_EXPONENT,
+                f"{path}, row {k + 2}: growth_exponent_p = {pk:g} is not a growth exponent (within "
+                f"±{MAX_GROWTH_EXPONENT:g} per mm)")
+    return p, force
 
 
 def normality_study(trials=None, plot_path=None) -> str:

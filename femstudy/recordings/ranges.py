@@ -3,9 +3,10 @@
 A surgical drill in bone pushes with tens of newtons and turns with hundreds of N·mm (thesis
 Table 4-1: thrust up to about 60 N); a channel reaching 10 kN or 100 N·m has a wrong unit or
 is not a drilling recording, and one of 1e300 N would carry on to overflow every fit. A
-channel that never changes recorded nothing (a dead sensor, an unplugged cable): the thrust is
-checked by :func:`femstudy.recordings.reader.check_recording`, the optional channels here, so
-that a dead torque channel is not compared as if it were a measurement.
+thrust or torque channel that never changes recorded nothing (a dead sensor, an unplugged
+cable): the thrust is checked by :func:`femstudy.recordings.reader.check_recording`, the
+torque here, so that a dead torque channel is not compared as if it were a measurement (the
+side forces and the depth, which no analysis needs, may well be constant).
 """
 
 from __future__ import annotations
@@ -21,10 +22,12 @@ MAX_MAGNITUDE = {"thrust": 1e4, "torque": 1e5, "fx": 1e4, "fy": 1e4, "depth": 1e
 UNIT_WORDS = {"thrust": "N", "torque": "N·mm", "fx": "N", "fy": "N", "depth": "mm"}
 
 
-def check_values(rec, where: Callable[[int], str], columns: Mapping[str, tuple[str, str]]) -> None:
-    """Raise :class:`UserError` for a channel beyond :data:`MAX_MAGNITUDE` or an optional
-    channel (torque, depth, fx, fy) that is constant; ``where(row)`` names a row in the
-    file's terms, ``columns`` maps a quantity to its column's (name, unit) as written."""
+def check_values(rec, where: Callable[[int], str], columns: Mapping[str, tuple[str, str]],
+                 hint: str = "is the column's unit right?") -> None:
+    """Raise :class:`UserError` for a channel beyond :data:`MAX_MAGNITUDE` or a constant
+    torque; ``where(row)`` names a row in the
+    file's terms, ``columns`` maps a quantity to its column's (name, unit) as written, ``hint``
+    says what to look at."""
     name = rec.name
     for quantity, values in (("thrust", rec.thrust_N), ("torque", rec.torque_Nmm), ("depth", rec.depth_mm),
                              ("fx", rec.fx_N), ("fy", rec.fy_N)):
@@ -35,8 +38,8 @@ def check_values(rec, where: Callable[[int], str], columns: Mapping[str, tuple[s
         if abs(values[row]) > MAX_MAGNITUDE[quantity]:
             raise UserError(f"recording {name}: {label} reaches {values[row]:.3g} {UNIT_WORDS[quantity]} at {where(row)}; "
                             f"a drilling recording stays within ±{MAX_MAGNITUDE[quantity]:g} {UNIT_WORDS[quantity]} "
-                            f"(is the column's unit right?)")
-        if quantity != "thrust" and np.ptp(values) == 0:
+                            f"({hint})")
+        if quantity == "torque" and np.ptp(values) == 0:
             raise UserError(f"recording {name}: {label} is constant ({values[0]:g} {UNIT_WORDS[quantity]}), so its "
                             f"sensor recorded nothing; remove the column, or name the right one with --columns "
                             f"{quantity}=NAME")

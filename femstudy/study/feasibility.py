@@ -227,9 +227,15 @@ def check(case, surface: Path, available_bytes: float, mesh_size_mm: float | Non
         raise UserError(f"the resolved transient would march about {e.resolved_steps:.3g} steps, estimated to take "
                         f"{e.seconds / 3600:.2g} h; shorten analysis.resolved_lead_s, or pass --force (force=True) "
                         "to run it anyway")
-    log.info("estimate: at least %.3g tets, %.3g DOFs, %.2g GB (a lower bound: coarse meshes resolve the surface "
-             "with more tets)", e.tets, e.dofs, e.memory_bytes / 1e9)
+    line = (f"estimate: at least {e.tets:.3g} tets, {e.dofs:.3g} DOFs, {e.memory_bytes / 1e9:.2g} GB (a lower bound: "
+            "coarse meshes resolve the surface with more tets)")
+    if line not in _said:  # a run of several cases estimates each case before it starts, and again as it starts
+        _said.add(line)
+        log.info(line)
     return e
+
+
+_said: set[str] = set()
 
 
 def preflight(case, cache_dir: Path, bones_dir: Path | None = None, force: bool = False,

@@ -158,14 +158,14 @@ def site_findings(case, model) -> list[Finding]:
         f"{cone:.2g} mm tip cone), or depth_mm = \"cortex\""))]
 
 
-def _numbers(node, path=()):
+def numbers_in(node, path=()):
     """(path, value) of every number in a nested summary document."""
     if isinstance(node, dict):
         for key, value in node.items():
-            yield from _numbers(value, path + (str(key),))
+            yield from numbers_in(value, path + (str(key),))
     elif isinstance(node, (list, tuple)):
         for k, value in enumerate(node):
-            yield from _numbers(value, path + (str(k),))
+            yield from numbers_in(value, path + (str(k),))
     elif isinstance(node, (int, float, np.floating, np.integer)) and not isinstance(node, bool):
         yield path, float(node)
 
@@ -181,7 +181,7 @@ def result_findings(summary: dict, length_mm: float) -> list[Finding]:
             worst[check] = (severity, message)
 
     for part in ("results", "dynamics", "hole", "margins"):
-        for path, value in _numbers(summary.get(part) or {}):
+        for path, value in numbers_in(summary.get(part) or {}):
             deflection = next((key for key in _DEFLECTIONS if key in path), None)
             where = " ".join(p for p in path if not p.isdigit() and p not in ("value", deflection)).replace("_", " ")
             stress = any("von_mises" in p or p.endswith("stress_MPa") for p in path)

@@ -41,11 +41,12 @@ def read_table(path: Path, source: str) -> Table:
     columns = {k: v for k, v in variables.items()
                if isinstance(v, np.ndarray) and v.dtype.kind in "fiubc" and v.ndim >= 1 and v.size > 1}
     vectors = [k for k, v in columns.items() if v.ndim == 1 and v.dtype.kind != "c"]
-    odd = [f"{k} ({_what(v)})" for k, v in columns.items() if k not in vectors]
-    hint = f"; save {odd[0].split(' (')[0]} as real vectors, one per channel" if odd else ""
-    require(vectors, f"recording {source} (MATLAB) has no real numeric vector variables; femstudy needs one per "
-                     f"column, e.g. t, Fz and Mz (variables found: "
-                     f"{', '.join(odd or list(variables)) or 'none'}){hint}")
+    odd = [k for k in columns if k not in vectors]
+    found = ", ".join(f"{k} ({_what(variables[k])})" if k in odd else k for k in variables) or "none"
+    hint = "" if not odd else (f"; save the real part of {odd[0]} as a vector" if columns[odd[0]].dtype.kind == "c"
+                               else f"; save the columns of {odd[0]} as vectors")
+    require(vectors, f"recording {source} (MATLAB) has no numeric vector variables; femstudy needs one per "
+                     f"column, e.g. t, Fz and Mz (variables found: {found}){hint}")
     units_struct = variables.get("units") if isinstance(variables.get("units"), dict) else {}
     metadata, origins = {}, {}
     for key, value in variables.items():
