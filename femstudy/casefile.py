@@ -283,10 +283,11 @@ class OutputSpec(_Section):
 
 class InputSpec(_Section):
     """One uncertain input's distribution (docs/uncertainty.md): ``normal`` (mean, sd),
-    ``lognormal`` (median, sigma_ln), ``uniform`` (low, high) or ``fixed`` (value), in the unit
-    the input's name carries (a ``*_factor`` multiplies the case's value), and its source."""
+    ``lognormal`` (median, sigma_ln), ``uniform`` (low, high), ``discrete`` (equally likely
+    ``values``) or ``fixed`` (value), in the unit the input's name carries (a ``*_factor``
+    multiplies the case's value), and its source."""
 
-    distribution: Literal["normal", "lognormal", "uniform", "fixed"]
+    distribution: Literal["normal", "lognormal", "uniform", "discrete", "fixed"]
     mean: float | None = None
     sd: float | None = Field(None, gt=0)
     median: float | None = Field(None, gt=0)
@@ -294,12 +295,13 @@ class InputSpec(_Section):
     low: float | None = None
     high: float | None = None
     value: float | None = None
+    values: list[float] | None = Field(None, min_length=1)
     source: str = "case file"
 
     @model_validator(mode="after")
     def _parameters_given(self):
         need = {"normal": ("mean", "sd"), "lognormal": ("median", "sigma_ln"), "uniform": ("low", "high"),
-                "fixed": ("value",)}[self.distribution]
+                "discrete": ("values",), "fixed": ("value",)}[self.distribution]
         missing = [k for k in need if getattr(self, k) is None]
         if missing:
             raise ValueError(f"a {self.distribution} distribution needs {' and '.join(need)}")
@@ -311,6 +313,8 @@ class InputSpec(_Section):
         """The library's :class:`femstudy.uncertainty.inputs.Distribution`."""
         from femstudy.uncertainty.inputs import Distribution
 
+        if self.distribution == "discrete":
+            return Distribution("discrete", tuple(float(v) for v in self.values), self.source)
         keys = {"normal": ("mean", "sd"), "lognormal": ("median", "sigma_ln"), "uniform": ("low", "high"),
                 "fixed": ("value",)}[self.distribution]
         return Distribution(self.distribution, tuple(float(getattr(self, k)) for k in keys), self.source)

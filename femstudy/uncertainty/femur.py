@@ -26,14 +26,14 @@ import numpy as np
 
 from femstudy.uncertainty.inputs import STIFFNESS_INPUTS, Distribution, distributions, nominal_values
 from femstudy.uncertainty.loads import amplitudes, sample_conditions, sample_loading
-from femstudy.uncertainty.reduced import RTOL, ReducedBasis, StiffnessFamily, StiffnessPoint, relative_bound, train
+from femstudy.uncertainty.reduced import RTOL, ReducedBases, StiffnessFamily, StiffnessPoint, train
 from femstudy.uncertainty.response import Envelope, UnitResponses
 
 log = logging.getLogger(__name__)
 
 #: Output columns of every sample (units in the names); the hole's are NaN where not run.
 GLOBAL_COLUMNS = ("max_deflection_mm", "drill_point_deflection_mm", "peak_thrust_N", "peak_torque_Nmm", "mu_f",
-                  "mu_w", "growth_exponent", "deflection_bound_mm", "solved_directly")
+                  "mu_w", "growth_exponent", "energy_error_bound", "drill_point_bound_mm", "solved_directly")
 
 
 @dataclass
@@ -42,7 +42,7 @@ class FemurBase:
 
     case, model, loading : the case, its :class:`femstudy.GlobalModel` and nominal :class:`femstudy.CaseLoading`
     units : nominal unit responses; distributions : input name → :class:`Distribution`
-    basis : the reduced basis (None when no stiffness input varies)
+    basis : the reduced bases (None when no stiffness input varies)
     convergence : the hole verdicts the case's record admits
     """
 
@@ -51,7 +51,7 @@ class FemurBase:
     loading: object
     units: UnitResponses
     distributions: dict
-    basis: ReducedBasis | None
+    basis: ReducedBases | None
     convergence: dict
     solver: str
     keep: Path | None
@@ -98,24 +98,22 @@ def femur_base(case, cache_dir: Path, solver: str = "auto", bones_dir: Path | No
     return base
 
 
-def _basis(base: FemurBase, shapes: np.ndarray, design: np.ndarray | None, basis_file: Path | None) -> ReducedBasis:
+def _basis(base: FemurBase, shapes: np.ndarray, design: np.ndarray | None, basis_file: Path | None) -> ReducedBases:
     family = StiffnessFamily.of(base.model)
     nominal = StiffnessPoint(clamp_length_mm=base.case.clamps.length_mm)
     if basis_file is not None and Path(basis_file).is_file():
         with np.load(basis_file) as data:
-            points = [StiffnessPoint(*row) for row in data["snapshots"]]
-            return ReducedBasis(family, data["V"], points, float(data["eigenvalue"]))
+            return ReducedBases.load(family, data)
     points = sorted({StiffnessPoint.of(v, nominal.clamp_length_mm) for v in base.values(design)},
-                    key=lambda p: (p.cortical, p.cancellous, p.clamp_length_mm)) if design is not None else []
-    basis = train(family, nominal, shapes, _training(points), base.solver)
+                    key=lambda p: (p.clamp_length_mm, p.cortical, p.cancellous)) if design is not None else []
+    bases = train(family, _training(points), nominal, shapes, base.solver)
     if basis_file is not None:
         from femstudy.atomic import atomic_path
 
         with atomic_path(basis_file) as tmp:
             with open(tmp, "wb") as handle:
-                np.savez(handle, V=basis.V, eigenvalue=basis.eigenvalue,
-                         snapshots=np.array([[p.cortical, p.cancellous, p.clamp_length_mm] for p in basis.snapshots]))
-    return basis
+                bases.save(handle)
+    return bases
 
 
 #: Most design points the greedy training visits (a deterministic, evenly spread subset).
@@ -147,14 +145,16 @@ def evaluate_samples(base: FemurBase, values: list[dict], hole: list[bool]) -> d
         envelope = Envelope.of(base.units, loads)
         out["max_deflection_mm"] = envelope.max_deflection_mm(loads).max(axis=1)
         out["drill_point_deflection_mm"] = base.units.drill_point_mm(loads).max(axis=1)
-        out["deflection_bound_mm"][:] = 0.0
+        out["energy_error_bound"][:] = 0.0
+        out["drill_point_bound_mm"][:] = 0.0
         out["solved_directly"][:] = 0.0
     else:
         for k, v in enumerate(values):
-            units, bound, direct = _stiffness_units(base, StiffnessPoint.of(v, clamp))
+            units, error, energy, point, direct = _stiffness_units(base, StiffnessPoint.of(v, clamp))
             out["max_deflection_mm"][k] = units.max_deflection_mm(loads[k]).max()
             out["drill_point_deflection_mm"][k] = units.drill_point_mm(loads[k]).max()
-            out["deflection_bound_mm"][k] = float((np.abs(loads[k]) @ bound).max())
+            out["energy_error_bound"][k] = float(np.max(error / np.maximum(energy, 1e-300)))
+            out["drill_point_bound_mm"][k] = float(point * (np.abs(loads[k]) @ error).max())
             out["solved_directly"][k] = float(direct)
             if hole[k]:
                 fields[k] = units.fields
@@ -170,13 +170,19 @@ def evaluate_samples(base: FemurBase, values: list[dict], hole: list[bool]) -> d
     return result
 
 
-def _stiffness_units(base: FemurBase, p: StiffnessPoint) -> tuple[UnitResponses, np.ndarray, bool]:
-    """Unit responses at ``p`` from the basis, or solved directly when its bound fails."""
-    fields, bound = base.basis.evaluate(p)
-    if relative_bound(fields, bound) <= RTOL:
-        return UnitResponses.of(fields, base.model.patch), bound, False
-    log.info("stiffness point %s: reduced-basis bound above %g; solving directly", p, RTOL)
-    return UnitResponses.of(base.basis.family.solve(p, base.solver), base.model.patch), np.zeros(2), True
+def _stiffness_units(base: FemurBase, p: StiffnessPoint) -> tuple[UnitResponses, np.ndarray, np.ndarray, float, bool]:
+    """Unit responses at ``p`` from the reduced basis of its clamped set with their energy-norm
+    error bounds, energy norms and drill-point factor (:meth:`ReducedBases.evaluate`), or
+    solved directly (zero error) when the bound fails or no basis covers the set."""
+    try:
+        fields, error, energy, point = base.basis.evaluate(p)
+        if np.all(error <= RTOL * energy):
+            return UnitResponses.of(fields, base.model.patch), error, energy, point, False
+    except KeyError:
+        pass
+    log.info("stiffness point %s: no reduced basis meets %g here; solving directly", p, RTOL)
+    return (UnitResponses.of(base.basis.family.solve(p, base.solver), base.model.patch), np.zeros(2), np.ones(2),
+            0.0, True)
 
 
 def _hole(base: FemurBase, values: dict, unit_fields: np.ndarray) -> tuple[dict, str]:

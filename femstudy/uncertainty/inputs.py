@@ -30,7 +30,8 @@ from femstudy.errors import UserError
 @dataclass(frozen=True)
 class Distribution:
     """A named distribution: ``normal`` (mean, sd), ``lognormal`` (median, sigma_ln: the SD of
-    the logarithm), ``uniform`` (low, high) or ``fixed`` (value); ``source`` says where it comes from."""
+    the logarithm), ``uniform`` (low, high), ``discrete`` (equally likely values) or ``fixed``
+    (value); ``source`` says where it comes from."""
 
     kind: str
     params: tuple
@@ -50,10 +51,15 @@ class Distribution:
         """Values at the quantiles ``u`` in (0, 1): how a unit-cube sample becomes inputs."""
         if self.kind == "fixed":
             return np.full(np.shape(u), float(self.params[0]))
+        if self.kind == "discrete":
+            k = np.minimum((np.asarray(u) * len(self.params)).astype(int), len(self.params) - 1)
+            return np.asarray(self.params, float)[k]
         return self.frozen().ppf(np.clip(u, 1e-12, 1 - 1e-12))
 
     def describe(self) -> str:
         """One line: kind and parameters."""
+        if self.kind == "discrete":
+            return "discrete(" + ", ".join(f"{p:.4g}" for p in self.params) + ")"
         names = {"normal": ("mean", "sd"), "lognormal": ("median", "sigma_ln"), "uniform": ("low", "high"),
                  "fixed": ("value",)}[self.kind]
         return f"{self.kind}(" + ", ".join(f"{n}={p:.4g}" for n, p in zip(names, self.params)) + ")"
@@ -92,6 +98,7 @@ FEED_CV = 0.05
 SPINDLE_CV = 0.05
 DEPTH_CV = 0.10
 CLAMP_HALF_RANGE_MM = 5.0
+CLAMP_LEVELS = (-1.0, -0.5, 0.0, 0.5, 1.0)
 
 
 def appendix_b_spread() -> dict:
@@ -159,9 +166,10 @@ def default_distributions(case, bone, depth_mm: float) -> dict[str, Distribution
         "cancellous_modulus_factor": Distribution("lognormal", (1.0, math.sqrt(math.log1p(cancellous ** 2))),
                                                   f"CV {cancellous:.2f} of the femoral cancellous modulus (Table 2-5: "
                                                   "0.389 +- 0.270 GPa) about Table 3-1's 0.5 GPa"),
-        "clamp_length_mm": Distribution("uniform", (clamp - CLAMP_HALF_RANGE_MM, clamp + CLAMP_HALF_RANGE_MM),
-                                        f"assumed +-{CLAMP_HALF_RANGE_MM:g} mm about the case's clamped length (the "
-                                        "thesis's Figure 3-12 gives no dimension)"),
+        "clamp_length_mm": Distribution("discrete", tuple(clamp + CLAMP_HALF_RANGE_MM * f for f in CLAMP_LEVELS),
+                                        f"assumed: equally likely lengths within +-{CLAMP_HALF_RANGE_MM:g} mm of the "
+                                        "case's (the thesis's Figure 3-12 gives no dimension); a few levels, as each "
+                                        "clamped node set costs its own reduced basis"),
     }
 
 

@@ -135,9 +135,11 @@ def markdown(doc: dict, files: list[str]) -> str:
             lines.append(f"Governing margin over {f['margin_basis']}.")
         if f["reduced_basis"]:
             r = f["reduced_basis"]
-            lines.append(f"Stiffness samples: reduced basis of {len(r['snapshots'])} snapshots "
-                         f"({r['basis_vectors']} vectors), largest error bound on the max deflection "
-                         f"{r['largest_deflection_bound_mm']:.3g} mm, {r['solved_directly']} sample(s) solved directly.")
+            lines.append(f"Stiffness samples: reduced bases of {r['clamped_sets']} clamped set(s), {r['snapshots']} "
+                         f"snapshots ({r['basis_vectors']} vectors, {r['factorisations']} factorisations); largest "
+                         f"energy-norm error bound {r['largest_energy_error_bound']:.2g} of the response, drill-point "
+                         f"deflection within {r['largest_drill_point_bound_mm']:.2g} mm; {r['solved_directly']} "
+                         "sample(s) solved directly.")
         lines.append("")
         sens = f["sensitivity"].get("max_deflection_mm") or {}
         if sens and isinstance(next(iter(sens.values())), dict):

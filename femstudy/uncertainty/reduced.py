@@ -1,21 +1,23 @@
-"""Unit responses of samples that change the stiffness: a reduced basis with a bounded error.
+"""Unit responses of samples that change the stiffness: reduced bases with a bounded error.
 
 The moduli enter K linearly: K(θ) = θ_c K_c + θ_s K_s, K_c and K_s the cortical and cancellous
-parts of the case's K (θ the modulus factors); the clamped length L changes the fixed DOFs S(L)
-(outer-surface nodes within L of each end). A sample's unit responses u_j (K(θ) u_j = p_j on
-the free DOFs, u_j = 0 on S(L), p_j the unit thrust and torque patterns) are sought in
-span V ∩ {v : v_S = 0} by Galerkin projection, V the orthonormalised responses at a few
-*snapshot* parameters (:func:`train`). Their residual r_j = (K(θ) u_j − p_j) on the free DOFs
-bounds the error of every DOF:
+parts of the case's K (θ the modulus factors). The clamped length changes which DOFs are fixed
+(outer-surface nodes within L of each end); each distinct clamped set gets its own basis.
 
-    ‖u_j − u_j,exact‖₂ ≤ ‖r_j‖₂ / λ_min(K_ff(θ, L)),   λ_min(K_ff(θ, L)) ≥ min(θ_c, θ_s) λ₀,
+For one clamped set, with A = K_ff(1) factorised once, a sample's unit responses u_j
+(K_ff(θ) u_j = p_j, p_j the unit thrust and torque patterns) are the Galerkin solutions in
+span V, V the orthonormalised responses at a few snapshot moduli (the first is θ = 1, A's own).
+Their residual r_j = K_ff(θ) u_j − p_j lies in span W = [K_c V, K_s V, P], so its dual norm is a
+small quadratic form, G = Wᵀ A⁻¹ W being computed once, and it bounds the error in energy:
 
-λ₀ the smallest eigenvalue of K_ff at θ = 1 and the shortest clamped length of the design: K(θ)
-− min θ · K(1) is a sum of positive semi-definite parts, and a longer clamp's K_ff is a
-principal submatrix of the shorter one's (Cauchy interlacing). A sample whose bound exceeds
-``rtol`` of its largest unit displacement is solved directly instead (a factorisation; counted).
-The snapshots are chosen greedily on the design's own stiffness points, worst bound first, so a
-design that passes its training needs no direct solve. Units: mm, N, N·mm, MPa.
+    ‖u_j − u_j,exact‖_K(θ) = ‖r_j‖_K(θ)⁻¹ ≤ ‖r_j‖_A⁻¹ / √min(θ_c, θ_s)
+
+(K(θ) − min θ · K(1) is a sum of positive semi-definite parts, so K(θ)⁻¹ ⪯ A⁻¹ / min θ). A
+linear output ℓ(u) is then bounded by |ℓ(e)| ≤ ‖ℓ‖_A⁻¹ ‖e‖_K / √min θ: the drill point's
+displacement D u gets |D e| ≤ √(λ_max(D A⁻¹ Dᵀ) / min θ) ‖e‖_K. Snapshots are added greedily
+at the design's worst moduli of that set until the energy error is below :data:`RTOL` of the
+response's energy norm everywhere on it; a sample that still fails is solved directly (a
+factorisation; counted). Units: mm, N, N·mm.
 """
 
 from __future__ import annotations
@@ -25,7 +27,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 
 from femstudy import fe
 from femstudy.materials import BoneMaterials
@@ -33,12 +34,10 @@ from femstudy.meshing.landmarks import clamps as clamp_masks, outer_faces
 
 log = logging.getLogger(__name__)
 
-#: Largest error bound accepted, relative to the largest unit displacement of the sample.
+#: Largest energy-norm error accepted, relative to the response's energy norm.
 RTOL = 1e-3
-#: Most snapshot parameters of a basis (each adds the two unit responses).
-MAX_SNAPSHOTS = 30
-#: Singular values of V restricted to the fixed DOFs below this (relative) count as zero.
-NULL_TOL = 1e-9
+#: Most snapshot moduli of one clamped set's basis.
+MAX_SNAPSHOTS = 12
 
 
 @dataclass(frozen=True)
@@ -57,11 +56,12 @@ class StiffnessPoint:
 
 @dataclass
 class StiffnessFamily:
-    """K(θ) = θ_c K_c + θ_s K_s and the clamp sets of a femur's model (full DOFs)."""
+    """K(θ) = θ_c K_c + θ_s K_s and the clamped sets of a femur's model (full DOFs)."""
 
     system: fe.FESystem
     femur: object
     patterns: np.ndarray
+    drill_point: sp.csr_matrix
     K_c: sp.csr_matrix
     K_s: sp.csr_matrix
     _outer: np.ndarray = field(repr=False)
@@ -77,118 +77,192 @@ class StiffnessFamily:
         other = fe.assemble(model.femur.mesh, doubled, order=model.system.order, long_axis=model.femur.frame.up)
         K_s = (other.K - model.system.K).tocsr()
         K_c = (model.system.K - K_s).tocsr()
-        return cls(model.system, model.femur, np.asarray(model.patch.patterns), K_c, K_s,
-                   outer_faces(model.femur.mesh, model.femur.frame))
+        return cls(model.system, model.femur, np.asarray(model.patch.patterns), sp.csr_matrix(model.patch.mean),
+                   K_c, K_s, outer_faces(model.femur.mesh, model.femur.frame))
 
-    def K(self, p: StiffnessPoint) -> sp.csr_matrix:
-        return (p.cortical * self.K_c + p.cancellous * self.K_s).tocsr()
-
-    def constraints(self, clamp_length_mm: float) -> fe.Constraints:
-        """The fixed DOFs of a clamped length (cached by the clamped node sets)."""
+    def constraints(self, clamp_length_mm: float) -> tuple[tuple, fe.Constraints]:
+        """The clamped set of a length: its key (clamped node counts) and constraints (cached)."""
         masks = clamp_masks(self.femur.mesh, self.femur.frame, self._outer, clamp_length_mm)
         key = (int(masks.proximal.sum()), int(masks.distal.sum()))
         if key not in self._sets:
             self._sets[key] = fe.clamp(self.system, masks)
-        return self._sets[key]
+        return key, self._sets[key]
+
+    def factorize(self, p: StiffnessPoint, solver: str = "auto") -> fe.FactorizedSystem:
+        _, bc = self.constraints(p.clamp_length_mm)
+        K = (p.cortical * self.K_c + p.cancellous * self.K_s).tocsr()
+        return fe.factorize(replace(self.system, K=K), bc, solver)
 
     def solve(self, p: StiffnessPoint, solver: str = "auto") -> np.ndarray:
         """(n_dofs, 2) unit responses at ``p`` by a factorisation."""
-        bc = self.constraints(p.clamp_length_mm)
-        fs = fe.factorize(replace(self.system, K=self.K(p)), bc, solver)
+        fs = self.factorize(p, solver)
         try:
-            return bc.expand(fs.factor.solve(self.patterns[bc.free]))
+            return fs.bc.expand(fs.factor.solve(self.patterns[fs.bc.free]))
         finally:
             fs.factor.close()
-
-    def smallest_eigenvalue(self, clamp_length_mm: float, solver: str = "auto") -> float:
-        """λ_min of K_ff at θ = 1 and ``clamp_length_mm`` [N/mm] (Lanczos on K_ff⁻¹)."""
-        bc = self.constraints(clamp_length_mm)
-        fs = fe.factorize(replace(self.system, K=self.K(StiffnessPoint())), bc, solver)
-        try:
-            n = len(bc.free)
-            op = sla.LinearOperator((n, n), matvec=lambda x: fs.factor.solve(np.asarray(x, float).ravel()), dtype=float)
-            largest = sla.eigsh(op, k=1, which="LA", tol=1e-6, return_eigenvectors=False)[0]
-        finally:
-            fs.factor.close()
-        return float(1.0 / largest)
 
 
 @dataclass
-class ReducedBasis:
-    """An orthonormal basis V of snapshot responses with its projections (see the module docstring).
+class ClampBasis:
+    """The reduced basis of one clamped set (see the module docstring).
 
-    V : (n_dofs, r); snapshots : the parameters solved; eigenvalue : λ₀ [N/mm]
+    V : (n_dofs, r) orthonormal; snapshots : (k, 2) modulus factors solved
+    Gc, Gs : Vᵀ K_c V, Vᵀ K_s V; VP : Vᵀ P; dual : Wᵀ A⁻¹ W, W = [K_c V, K_s V, P]
+    point : λ_max(D A⁻¹ Dᵀ), D the drill point's footprint mean
     """
 
-    family: StiffnessFamily
     V: np.ndarray
-    snapshots: list
-    eigenvalue: float
-    _G: tuple = field(default=None, repr=False)
-    _nulls: dict = field(default_factory=dict, repr=False)
+    snapshots: np.ndarray
+    Gc: np.ndarray
+    Gs: np.ndarray
+    VP: np.ndarray
+    dual: np.ndarray
+    point: float
 
-    def __post_init__(self):
-        self._project()
+    def evaluate(self, cortical: float, cancellous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit responses (n_dofs, 2), their energy-norm error bounds and energy norms."""
+        A = cortical * self.Gc + cancellous * self.Gs
+        y = np.linalg.solve(A, self.VP)
+        c = np.vstack([cortical * y, cancellous * y, -np.eye(2)])  # r = W c
+        error = np.sqrt(np.maximum(np.einsum("ij,ik,kj->j", c, self.dual, c), 0.0) / min(cortical, cancellous))
+        energy = np.sqrt(np.einsum("ij,ik,kj->j", y, A, y))
+        return self.V @ y, error, energy
 
-    def _project(self) -> None:
-        KcV, KsV = self.family.K_c @ self.V, self.family.K_s @ self.V
-        self._G = (KcV, KsV, self.V.T @ KcV, self.V.T @ KsV, self.V.T @ self.family.patterns)
-        self._nulls = {}
+    def arrays(self, prefix: str) -> dict:
+        return {f"{prefix}{k}": v for k, v in self.__dict__.items()}
 
-    def add(self, p: StiffnessPoint, fields: np.ndarray) -> None:
-        """Add a snapshot's responses (orthonormalised against V)."""
-        X = fields - self.V @ (self.V.T @ fields)
-        X = X - self.V @ (self.V.T @ X)
-        Q, R = np.linalg.qr(X)
-        keep = np.abs(np.diag(R)) > 1e-12 * np.linalg.norm(fields, axis=0).max()
-        self.V = np.hstack([self.V, Q[:, keep]])
-        self.snapshots.append(p)
-        self._project()
-
-    def _null(self, bc: fe.Constraints) -> np.ndarray:
-        key = bc.key
-        if key not in self._nulls:
-            _, s, Vt = np.linalg.svd(self.V[bc.fixed], full_matrices=True)
-            rank = int(np.sum(s > NULL_TOL * max(s.max(initial=0.0), 1.0)))
-            self._nulls[key] = Vt[rank:].T
-        return self._nulls[key]
-
-    def evaluate(self, p: StiffnessPoint) -> tuple[np.ndarray, np.ndarray]:
-        """(n_dofs, 2) unit responses at ``p`` and the bound on each column's error [mm]."""
-        KcV, KsV, Gc, Gs, VP = self._G
-        bc = self.family.constraints(p.clamp_length_mm)
-        N = self._null(bc)
-        A = N.T @ (p.cortical * Gc + p.cancellous * Gs) @ N
-        y = N @ np.linalg.solve(A, N.T @ VP)
-        residual = (p.cortical * KcV + p.cancellous * KsV) @ y - self.family.patterns
-        r = np.linalg.norm(residual[bc.free], axis=0)
-        return self.V @ y, r / (min(p.cortical, p.cancellous) * self.eigenvalue)
+    @classmethod
+    def from_arrays(cls, data, prefix: str) -> "ClampBasis":
+        return cls(**{k: (float(data[prefix + k]) if k == "point" else data[prefix + k])
+                      for k in cls.__dataclass_fields__})
 
 
-def relative_bound(fields: np.ndarray, bound: np.ndarray) -> float:
-    """The larger column's bound over its largest nodal displacement."""
-    peak = np.linalg.norm(fields.reshape(-1, 3, fields.shape[1]), axis=1).max(axis=0)
-    return float(np.max(bound / np.maximum(peak, 1e-300)))
+def build(family: StiffnessFamily, clamp_length_mm: float, moduli: list, solver: str = "auto",
+          nominal_fields: np.ndarray | None = None, rtol: float = RTOL,
+          max_snapshots: int = MAX_SNAPSHOTS) -> tuple[ClampBasis, int]:
+    """The basis of one clamped set, trained greedily on ``moduli`` ((θ_c, θ_s) pairs); returns
+    it and the factorisations it took. ``nominal_fields`` (the study's unit responses, when this
+    is the case's own clamped set) saves solving θ = 1."""
+    one = StiffnessPoint(1.0, 1.0, clamp_length_mm)
+    fs = family.factorize(one, solver)  # A = K_ff(1): the dual norms, and the first snapshot
+    factorisations = 1
+    try:
+        free = fs.bc.free
+        first = nominal_fields if nominal_fields is not None else fs.bc.expand(fs.factor.solve(family.patterns[free]))
+        V = np.zeros((family.system.n_dofs, 0))
+        snapshots: list = []
+        AinvW = np.zeros((len(free), 0))
+        Dt = family.drill_point[:, free].T.toarray()
+        point = float(np.linalg.eigvalsh(Dt.T @ fs.factor.solve(Dt)).max())
+        P = family.patterns[free]
+        AinvP = fs.factor.solve(P)
+
+        def grow(fields, theta):
+            nonlocal V, AinvW
+            X = fields - V @ (V.T @ fields)
+            X = X - V @ (V.T @ X)
+            Q, R = np.linalg.qr(X)
+            keep = np.abs(np.diag(R)) > 1e-10 * np.linalg.norm(fields, axis=0).max()
+            new = Q[:, keep]
+            V = np.hstack([V, new])
+            snapshots.append(theta)
+            AinvW = np.hstack([AinvW, fs.factor.solve(np.hstack([(family.K_c @ new)[free], (family.K_s @ new)[free]]))])
+
+        def assemble_basis() -> ClampBasis:
+            r = V.shape[1]
+            KcV, KsV = family.K_c @ V, family.K_s @ V
+            W = np.hstack([KcV[free], KsV[free], P])
+            # AinvW holds the columns in the order they were added: [Kc v1, Ks v1, Kc v2, ...] per block
+            order = _block_order(AinvW.shape[1] // 2, [len(b) for b in blocks])
+            Z = np.hstack([AinvW[:, order], AinvP])
+            return ClampBasis(V, np.array(snapshots, float), V.T @ KcV, V.T @ KsV, V.T @ family.patterns, W.T @ Z,
+                              point)
+
+        blocks: list = []
+
+        def add(fields, theta):
+            before = V.shape[1]
+            grow(fields, theta)
+            blocks.append(range(before, V.shape[1]))
+
+        add(first, (1.0, 1.0))
+        basis = assemble_basis()
+        while len(snapshots) < max_snapshots:
+            worst, where = 0.0, None
+            for theta in moduli:
+                _, error, energy = basis.evaluate(*theta)
+                rel = float(np.max(error / np.maximum(energy, 1e-300)))
+                if rel > worst:
+                    worst, where = rel, theta
+            log.info("reduced basis at clamp %.3g mm: %d snapshots, largest relative energy error %.2g",
+                     clamp_length_mm, len(snapshots), worst)
+            if worst <= rtol or where is None:
+                break
+            add(family.solve(StiffnessPoint(*where, clamp_length_mm), solver), tuple(where))
+            factorisations += 1
+            basis = assemble_basis()
+    finally:
+        fs.factor.close()
+    return basis, factorisations
 
 
-def train(family: StiffnessFamily, nominal: StiffnessPoint, nominal_fields: np.ndarray, points: list,
-          solver: str = "auto", rtol: float = RTOL, max_snapshots: int = MAX_SNAPSHOTS) -> ReducedBasis:
-    """A basis whose bound is below ``rtol`` at every training point: the nominal responses
-    (``nominal_fields``, the study's static shapes), then greedily the worst training point."""
-    shortest = min([p.clamp_length_mm for p in points] + [nominal.clamp_length_mm])
-    eigenvalue = family.smallest_eigenvalue(shortest, solver)
-    log.info("reduced basis: lambda_min(K_ff) = %.4g N/mm at clamp length %.3g mm", eigenvalue, shortest)
-    basis = ReducedBasis(family, np.zeros((nominal_fields.shape[0], 0)), [], eigenvalue)
-    basis.add(nominal, nominal_fields)
-    while len(basis.snapshots) < max_snapshots:
-        worst, where = 0.0, None
-        for p in points:
-            fields, bound = basis.evaluate(p)
-            rel = relative_bound(fields, bound)
-            if rel > worst:
-                worst, where = rel, p
-        log.info("reduced basis: %d snapshots, largest relative bound %.3g", len(basis.snapshots), worst)
-        if worst <= rtol or where is None:
-            break
-        basis.add(where, family.solve(where, solver))
-    return basis
+def _block_order(n_vectors: int, sizes: list) -> np.ndarray:
+    """Column order turning per-block [K_c new, K_s new] pairs into [K_c V, K_s V]."""
+    kc, ks, start = [], [], 0
+    for size in sizes:
+        kc += list(range(start, start + size))
+        ks += list(range(start + size, start + 2 * size))
+        start += 2 * size
+    assert len(kc) == n_vectors
+    return np.array(kc + ks, dtype=int)
+
+
+@dataclass
+class ReducedBases:
+    """The bases of every clamped set a design visits, keyed by the set."""
+
+    family: StiffnessFamily
+    bases: dict
+    factorisations: int
+
+    def evaluate(self, p: StiffnessPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+        """Unit responses, energy errors, energy norms and the drill-point factor √λ_max(D A⁻¹ Dᵀ)."""
+        key, _ = self.family.constraints(p.clamp_length_mm)
+        basis = self.bases.get(key)
+        if basis is None:
+            raise KeyError(key)
+        fields, error, energy = basis.evaluate(p.cortical, p.cancellous)
+        return fields, error, energy, float(np.sqrt(basis.point / min(p.cortical, p.cancellous)))
+
+    def save(self, path) -> None:
+        arrays = {}
+        for k, (key, b) in enumerate(self.bases.items()):
+            arrays.update(b.arrays(f"b{k}_"))
+            arrays[f"b{k}_key"] = np.array(key)
+        arrays["count"] = np.array(len(self.bases))
+        arrays["factorisations"] = np.array(self.factorisations)
+        np.savez(path, **arrays)
+
+    @classmethod
+    def load(cls, family: StiffnessFamily, data) -> "ReducedBases":
+        bases = {tuple(int(x) for x in data[f"b{k}_key"]): ClampBasis.from_arrays(data, f"b{k}_")
+                 for k in range(int(data["count"]))}
+        return cls(family, bases, int(data["factorisations"]))
+
+
+def train(family: StiffnessFamily, points: list, nominal: StiffnessPoint, nominal_fields: np.ndarray,
+          solver: str = "auto") -> ReducedBases:
+    """A basis for every clamped set among ``points`` (the design's stiffness points)."""
+    groups: dict = {}
+    for p in points + [nominal]:
+        key, _ = family.constraints(p.clamp_length_mm)
+        groups.setdefault(key, (p.clamp_length_mm, set()))[1].add((p.cortical, p.cancellous))
+    nominal_key, _ = family.constraints(nominal.clamp_length_mm)
+    bases, total = {}, 0
+    for key, (length, moduli) in groups.items():
+        basis, n = build(family, length, sorted(moduli), solver,
+                         nominal_fields if key == nominal_key else None)
+        bases[key] = basis
+        total += n
+    log.info("reduced bases: %d clamped set(s), %d factorisations", len(bases), total)
+    return ReducedBases(family, bases, total)

@@ -95,8 +95,9 @@ def _femur_point(point: Point, jobs: dict, settings: dict) -> dict:
     nominal = evaluate_samples(base, [nominal_values(base.case, base.loading.depth_mm)], [True])
     basis = base.basis
     reduced = None if basis is None else {
-        "snapshots": [[p.cortical, p.cancellous, p.clamp_length_mm] for p in basis.snapshots],
-        "basis_vectors": int(basis.V.shape[1]), "smallest_eigenvalue_N_mm": basis.eigenvalue}
+        "clamped_sets": len(basis.bases), "factorisations": basis.factorisations,
+        "snapshots": sum(len(b.snapshots) for b in basis.bases.values()),
+        "basis_vectors": sum(int(b.V.shape[1]) for b in basis.bases.values())}
     return {"nominal": {k: (v[0] if isinstance(v, list) else v) for k, v in nominal.items()},
             "inputs": distribution_table(base.distributions), "reduced": reduced, "prepare_s": base.seconds,
             "dofs": base.model.system.n_dofs, "peak_MB": _peak_mb()}
@@ -246,7 +247,7 @@ def _local_cluster(workers: int, memory_limit: float | None):
 
     limit = memory_limit or 0.8 * psutil.virtual_memory().available / workers
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=int(limit),
-                           dashboard_address=None)
+                           dashboard_address=":0")  # any free port: none is published
     return cluster, int(limit)
 
 
@@ -265,7 +266,8 @@ def _femur_result(job: dict, femur: dict, chunks: list[dict], method: str) -> Fe
         sensitivity = {o: design.rank_correlations(names, job["unit"], columns[o]) for o in OUTPUTS}
     reduced = femur["reduced"]
     if reduced is not None:
-        reduced = {**reduced, "largest_deflection_bound_mm": float(np.max(columns["deflection_bound_mm"])),
+        reduced = {**reduced, "largest_energy_error_bound": float(np.max(columns["energy_error_bound"])),
+                   "largest_drill_point_bound_mm": float(np.max(columns["drill_point_bound_mm"])),
                    "solved_directly": int(np.sum(columns["solved_directly"]))}
     case = job["case"]
     return FemurUncertainty(case.name, case.geometry.surface, femur["inputs"], job["unit"], columns, femur["nominal"],
