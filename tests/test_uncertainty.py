@@ -207,13 +207,13 @@ def test_a_local_cluster_gives_the_numbers_of_one_process(tmp_path, mesh_cache):
     from femstudy.uncertainty.run import run_uncertainty
 
     case = coarse_case(samples=16)
-    common = dict(method="sobol", inputs=("mu_w_factor", "feed_mm_s", "clamp_length_mm"), hole_samples=0,
+    common = dict(method="sobol", inputs=("mu_w_factor", "feed_mm_s", "depth_mm"), hole_samples=0,
                   cache_dir=mesh_cache)
     serial = run_uncertainty([case], tmp_path / "serial", workers=1, **common)
     dask = run_uncertainty([case], tmp_path / "dask", workers=2, memory_limit=3e9, **common)
     assert dask.execution["scheduler"] == "LocalCluster"
     assert len(serial.femurs[0].unit) == 16 * 5
-    for column in ("max_deflection_mm", "drill_point_deflection_mm", "clamp_length_mm"):
+    for column in ("max_deflection_mm", "drill_point_deflection_mm", "depth_mm"):
         assert np.allclose(serial.femurs[0].samples[column], dask.femurs[0].samples[column], rtol=1e-9, atol=0)
     sens = dask.femurs[0].sensitivity["max_deflection_mm"]
-    assert set(sens) == {"mu_w_factor", "feed_mm_s", "clamp_length_mm"} and all("ST_conf" in s for s in sens.values())
+    assert set(sens) == {"mu_w_factor", "feed_mm_s", "depth_mm"} and all("ST_conf" in s for s in sens.values())

@@ -66,6 +66,7 @@ class StiffnessFamily:
     K_s: sp.csr_matrix
     _outer: np.ndarray = field(repr=False)
     _sets: dict = field(default_factory=dict, repr=False)
+    _lengths: dict = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, model) -> "StiffnessFamily":
@@ -82,11 +83,14 @@ class StiffnessFamily:
 
     def constraints(self, clamp_length_mm: float) -> tuple[tuple, fe.Constraints]:
         """The clamped set of a length: its key (clamped node counts) and constraints (cached)."""
+        if clamp_length_mm in self._lengths:
+            return self._lengths[clamp_length_mm]
         masks = clamp_masks(self.femur.mesh, self.femur.frame, self._outer, clamp_length_mm)
         key = (int(masks.proximal.sum()), int(masks.distal.sum()))
         if key not in self._sets:
             self._sets[key] = fe.clamp(self.system, masks)
-        return key, self._sets[key]
+        self._lengths[clamp_length_mm] = key, self._sets[key]
+        return self._lengths[clamp_length_mm]
 
     def factorize(self, p: StiffnessPoint, solver: str = "auto") -> fe.FactorizedSystem:
         _, bc = self.constraints(p.clamp_length_mm)

@@ -13,7 +13,9 @@ The work is two kinds of independent points run by the sweeps' resumable executo
 ``workers`` > 1 runs them on a Dask ``LocalCluster`` of that many single-threaded worker
 processes, each limited to ``memory_limit`` bytes (default: 80 % of the memory available at the
 start, shared equally); ``scheduler`` sends them to a running Dask scheduler instead; one worker
-runs them in this process. A worker keeps each femur it has prepared for the next chunks.
+runs them in this process. A worker keeps the femur it prepared last for the next chunks (one:
+its memory is one femur's model, unit responses and reduced bases), and is not paused at Dask's
+80 % mark (a worker holding its femur would never resume): it is restarted past 95 %.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ log = logging.getLogger(__name__)
 CHUNK = 2048
 STIFFNESS_CHUNK = 256
 HOLE_CHUNK = 2
-#: This process's prepared femurs (a Dask worker keeps them between chunks).
+#: This process's last prepared femur (a Dask worker keeps it between chunks).
 _BASES: dict = {}
 
 
@@ -57,7 +59,7 @@ def _job(case, names, method, samples, seed, hole_samples, folder: Path) -> dict
     case_key = _key(case.model_dump(mode="json"), file_digest(surface) if surface else "builtin")
     design_key = _key(method, list(names), samples, seed)
     unit = design.unit_design(method, names, samples, seed)
-    return {"case": case, "names": tuple(names), "unit": unit, "key": f"{case_key}-{design_key}",
+    return {"case": case, "names": tuple(names), "unit": unit, "key": f"{case_key}-{design_key}", "samples": samples,
             "hole": min(hole_samples, len(unit)), "basis_file": folder / f"basis-{case_key}-{design_key}.npz"}
 
 
@@ -76,6 +78,7 @@ def _base(job: dict, settings: dict):
 
     if job["key"] not in _BASES:
         _limit_threads(settings["threads"])
+        _BASES.clear()  # one femur per worker bounds its memory
         _BASES[job["key"]] = femur_base(job["case"], settings["cache_dir"], settings["solver"], settings["bones_dir"],
                                         settings["keep"], job["names"], job["unit"], job["basis_file"])
     return _BASES[job["key"]]
@@ -223,7 +226,7 @@ def run_uncertainty(cases, out: str | PathLike | None = None, *, samples: int | 
     execution = {"workers": workers, "scheduler": scheduler or ("LocalCluster" if cluster else "this process"),
                  "memory_limit_per_worker_bytes": limit, "threads_per_worker": threads,
                  "peak_worker_memory_MB": peak, "wall_s": time.perf_counter() - started}
-    result = UncertaintyResult(the_method, int(len(next(iter(jobs.values()))["unit"])), tuple(femurs), execution,
+    result = UncertaintyResult(the_method, int(next(iter(jobs.values()))["samples"]), tuple(femurs), execution,
                                folder)
     from femstudy.uncertainty.output import write_results
 
@@ -245,7 +248,10 @@ def _local_cluster(workers: int, memory_limit: float | None):
                         "(or --workers 1)") from None
     import psutil
 
+    import dask
+
     limit = memory_limit or 0.8 * psutil.virtual_memory().available / workers
+    dask.config.set({"distributed.worker.memory.pause": False})
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, memory_limit=int(limit),
                            dashboard_address=":0")  # any free port: none is published
     return cluster, int(limit)
