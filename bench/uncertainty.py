@@ -89,7 +89,7 @@ def cohort(args) -> None:
     for folder in (whole, broken):
         subprocess.run(["rm", "-rf", str(folder)], check=True)
     seconds = timed(femstudy(*common, "--out", str(whole)))
-    print(f"uninterrupted: {len(cases)} cases in {seconds:.0f} s")
+    print(f"uninterrupted: {len(cases)} cases in {seconds:.0f} s", flush=True)
     run = subprocess.Popen(femstudy(*common, "--out", str(broken)), cwd=REPO, start_new_session=True,
                            stdout=subprocess.DEVNULL)
     points = broken / "points"
@@ -98,7 +98,7 @@ def cohort(args) -> None:
     stored = len(list(points.glob("*.json")))
     os.killpg(run.pid, signal.SIGKILL)
     run.wait()
-    print(f"killed with {stored} points stored")
+    print(f"killed with {stored} points stored", flush=True)
     seconds = timed(femstudy(*common, "--out", str(broken)))
     print(f"resumed: {seconds:.0f} s")
     a, b = _rows(whole), _rows(broken)
@@ -121,7 +121,7 @@ def main() -> None:
     p.set_defaults(run=sobol)
     p = sub.add_parser("cohort")
     p.add_argument("--samples", type=int, default=256)
-    p.add_argument("--hole-samples", type=int, default=2)
+    p.add_argument("--hole-samples", type=int, default=0)
     p.add_argument("--inputs", default="load")
     p.add_argument("--kill-after", type=int, default=4, help="stored points before the kill")
     p.set_defaults(run=cohort)

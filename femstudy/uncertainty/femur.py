@@ -116,8 +116,9 @@ def _basis(base: FemurBase, shapes: np.ndarray, design: np.ndarray | None, basis
     return bases
 
 
-#: Most design points the greedy training visits (a deterministic, evenly spread subset).
-TRAINING_POINTS = 256
+#: Most design points the greedy training visits (a deterministic, evenly spread subset); a
+#: visit costs a small r × r solve, so a design's every point is visited up to this many.
+TRAINING_POINTS = 100_000
 
 
 def _training(points: list) -> list:

@@ -50,7 +50,9 @@ def write_figures(femur, folder: Path) -> list[str]:
     fig, axes = plt.subplots(2, len(outputs), figsize=(3.6 * len(outputs), 5.6), squeeze=False)
     for k, o in enumerate(outputs):
         x = np.sort(femur.samples[o][np.isfinite(femur.samples[o])])
-        axes[0, k].hist(x, bins=min(60, max(10, x.size // 20)), color="tab:blue", alpha=0.8)
+        shown = np.percentile(x, [0.5, 99.5]) if x.size >= 200 else (x[0], x[-1])  # the tails' extremes: CSV
+        axes[0, k].hist(x, bins=min(60, max(10, x.size // 20)), range=tuple(shown), color="tab:blue", alpha=0.8)
+        axes[1, k].set_xlim(*shown)
         axes[0, k].set_title(TITLES[o], fontsize=9)
         axes[1, k].plot(x, np.arange(1, x.size + 1) / x.size, color="tab:blue")
         for q in (5, 50, 95):
@@ -59,7 +61,7 @@ def write_figures(femur, folder: Path) -> list[str]:
         axes[1, k].set_ylabel("cumulative probability" if k == 0 else "")
         if o == "governing_margin":
             axes[1, k].axvline(1.0, color="tab:red", lw=1.2)
-    fig.suptitle(f"{femur.name}: {len(femur.unit)} samples (dashed: 5, 50, 95 %)", fontsize=10)
+    fig.suptitle(f"{femur.name}: {len(femur.unit)} samples (dashed: 5, 50, 95 %; 0.5-99.5 % shown)", fontsize=10)
     fig.tight_layout()
     names = []
     path = folder / f"uncertainty-{femur.name}-distributions.png"

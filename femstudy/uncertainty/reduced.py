@@ -123,13 +123,18 @@ class ClampBasis:
     dual: np.ndarray
     point: float
 
-    def evaluate(self, cortical: float, cancellous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Unit responses (n_dofs, 2), their energy-norm error bounds and energy norms."""
+    def coordinates(self, cortical: float, cancellous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Reduced coordinates y (r, 2), energy-norm error bounds and energy norms (no full vector)."""
         A = cortical * self.Gc + cancellous * self.Gs
         y = np.linalg.solve(A, self.VP)
         c = np.vstack([cortical * y, cancellous * y, -np.eye(2)])  # r = W c
         error = np.sqrt(np.maximum(np.einsum("ij,ik,kj->j", c, self.dual, c), 0.0) / min(cortical, cancellous))
         energy = np.sqrt(np.einsum("ij,ik,kj->j", y, A, y))
+        return y, error, energy
+
+    def evaluate(self, cortical: float, cancellous: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit responses (n_dofs, 2), their energy-norm error bounds and energy norms."""
+        y, error, energy = self.coordinates(cortical, cancellous)
         return self.V @ y, error, energy
 
     def arrays(self, prefix: str) -> dict:
@@ -194,7 +199,7 @@ def build(family: StiffnessFamily, clamp_length_mm: float, moduli: list, solver:
         while len(snapshots) < max_snapshots:
             worst, where = 0.0, None
             for theta in moduli:
-                _, error, energy = basis.evaluate(*theta)
+                _, error, energy = basis.coordinates(*theta)
                 rel = float(np.max(error / np.maximum(energy, 1e-300)))
                 if rel > worst:
                     worst, where = rel, theta

@@ -89,13 +89,14 @@ def _peak_mb() -> float:
 
 
 def _femur_point(point: Point, jobs: dict, settings: dict) -> dict:
-    """Stage 1: the femur prepared, its basis trained and stored, the nominal sample."""
+    """Stage 1: the femur prepared, its basis trained and stored, the nominal sample (with the
+    hole models when any sample runs them)."""
     from femstudy.uncertainty.femur import distribution_table, evaluate_samples
     from femstudy.uncertainty.inputs import nominal_values
 
     job = jobs[point.overrides["job"]]
     base = _base(job, settings)
-    nominal = evaluate_samples(base, [nominal_values(base.case, base.loading.depth_mm)], [True])
+    nominal = evaluate_samples(base, [nominal_values(base.case, base.loading.depth_mm)], [job["hole"] > 0])
     basis = base.basis
     reduced = None if basis is None else {
         "clamped_sets": len(basis.bases), "factorisations": basis.factorisations,
