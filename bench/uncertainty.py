@@ -109,7 +109,8 @@ def cohort(args) -> None:
         x, y = float(a[i][k]), float(b[i][k])  # text columns (case, margin basis) never differ here
         worst = max(worst, abs(x - y) / max(abs(x), abs(y), 1e-300))
     print(f"{len(a)} samples x {len(a[0])} columns compared: {len(differ)} values differ, largest relative "
-          f"difference {worst:.2g} (kept solutions serve a repeated hole model: same to round-off)")
+          f"difference {worst:.2g}" + (" (kept solutions serving a repeated hole model differ by round-off)"
+                                       if differ else " (identical CSVs)"))
 
 
 def main() -> None:
