@@ -33,6 +33,7 @@ _API = {
     "mesh_case": "femstudy.study.femur", "femur_model": "femstudy.study.femur",
     "write_femur": "femstudy.meshing.builtin_femur", "FemurParameters": "femstudy.meshing.builtin_femur",
     "sweep": "femstudy.sweeps.run", "SweepResult": "femstudy.sweeps.run",
+    "run_uncertainty": "femstudy.uncertainty.run", "UncertaintyResult": "femstudy.uncertainty.result",
     "calibrate": "femstudy.recordings.workflow", "CalibrationResult": "femstudy.recordings.pipeline",
     "read_recording": "femstudy.recordings.reader", "Recording": "femstudy.recordings.reader",
     "write_recording": "femstudy.recordings.reader", "synthesize": "femstudy.recordings.synthetic",

@@ -311,6 +311,70 @@ class OutputSpec(_Section):
     screenshot: bool = True
 
 
+class InputSpec(_Section):
+    """One uncertain input's distribution (docs/uncertainty.md): ``normal`` (mean, sd),
+    ``lognormal`` (median, sigma_ln), ``uniform`` (low, high), ``discrete`` (equally likely
+    ``values``) or ``fixed`` (value), in the unit the input's name carries (a ``*_factor``
+    multiplies the case's value), and its source."""
+
+    distribution: Literal["normal", "lognormal", "uniform", "discrete", "fixed"]
+    mean: float | None = None
+    sd: float | None = Field(None, gt=0)
+    median: float | None = Field(None, gt=0)
+    sigma_ln: float | None = Field(None, gt=0)
+    low: float | None = None
+    high: float | None = None
+    value: float | None = None
+    values: list[float] | None = Field(None, min_length=1)
+    source: str = "case file"
+
+    @model_validator(mode="after")
+    def _parameters_given(self):
+        need = {"normal": ("mean", "sd"), "lognormal": ("median", "sigma_ln"), "uniform": ("low", "high"),
+                "discrete": ("values",), "fixed": ("value",)}[self.distribution]
+        missing = [k for k in need if getattr(self, k) is None]
+        if missing:
+            raise ValueError(f"a {self.distribution} distribution needs {' and '.join(need)}")
+        if self.distribution == "uniform" and not self.low < self.high:
+            raise ValueError("uniform: low must be smaller than high")
+        return self
+
+    def to_distribution(self):
+        """The library's :class:`femstudy.uncertainty.inputs.Distribution`."""
+        from femstudy.uncertainty.inputs import Distribution
+
+        if self.distribution == "discrete":
+            return Distribution("discrete", tuple(float(v) for v in self.values), self.source)
+        keys = {"normal": ("mean", "sd"), "lognormal": ("median", "sigma_ln"), "uniform": ("low", "high"),
+                "fixed": ("value",)}[self.distribution]
+        return Distribution(self.distribution, tuple(float(getattr(self, k)) for k in keys), self.source)
+
+
+class UncertaintySpec(_Section):
+    """``femstudy uncertainty`` (docs/uncertainty.md): the inputs that vary, their distributions
+    where they differ from the cited defaults, the sampling (``montecarlo``: ``samples`` random
+    draws; ``sobol``: Saltelli's design of ``samples`` base samples, N(D + 2) evaluations) and
+    how many samples also run the hole models (``hole_samples``)."""
+
+    inputs: list[str] = Field(default_factory=lambda: [
+        "mu_f_factor", "mu_w_factor", "cutting_force_factor", "feed_mm_s", "spindle_rpm", "depth_mm",
+        "cortical_modulus_factor", "cancellous_modulus_factor", "clamp_length_mm"], min_length=1)
+    distributions: dict[str, InputSpec] = Field(default_factory=dict)
+    method: Literal["montecarlo", "sobol"] = "montecarlo"
+    samples: int = Field(1024, ge=8, le=1_000_000)
+    seed: int = Field(0, ge=0)
+    hole_samples: int = Field(16, ge=0, le=100_000)
+
+    @model_validator(mode="after")
+    def _known_inputs(self):
+        from femstudy.uncertainty.inputs import INPUTS
+
+        unknown = sorted((set(self.inputs) | set(self.distributions)) - set(INPUTS))
+        if unknown:
+            raise ValueError(f"unknown uncertain input(s) {', '.join(unknown)}: choose from {', '.join(INPUTS)}")
+        return self
+
+
 class Case(_Section):
     """A whole study case. ``source`` is the file it came from (not a TOML key)."""
 
@@ -327,6 +391,7 @@ class Case(_Section):
     time: TimeSpec = TimeSpec()
     analysis: AnalysisSpec = AnalysisSpec()
     output: OutputSpec = OutputSpec()
+    uncertainty: UncertaintySpec = UncertaintySpec()
     source: Path | None = Field(None, exclude=True)
 
     @field_validator("name")

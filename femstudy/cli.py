@@ -29,7 +29,7 @@ from femstudy import __version__
 from femstudy.errors import UserError, environment_message
 
 #: Sub-command modules, in the order ``femstudy --help`` lists them.
-COMMANDS = ["run", "view", "sweep", "mesh", "femur", "loads", "synth", "calibrate", "normality", "diagnose"]
+COMMANDS = ["run", "view", "sweep", "uncertainty", "mesh", "femur", "loads", "synth", "calibrate", "normality", "diagnose"]
 
 
 @dataclass(frozen=True)

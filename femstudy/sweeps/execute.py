@@ -70,11 +70,11 @@ def _store(folder: Path, point: Point, result: dict) -> dict:
 
 def execute(points: list[Point], folder: Path, evaluate: Callable, args: tuple = (), *, workers: int = 1,
             scheduler: str | None = None, memory_bytes: Callable | None = None,
-            memory_budget_bytes: float | None = None) -> list[dict]:
+            memory_budget_bytes: float | None = None, label: str = "sweep points") -> list[dict]:
     """Evaluate ``evaluate(point, *args) -> dict`` for every point not finished in ``folder``.
 
     Returns the records of all points, in the order given. ``memory_bytes(point)`` estimates
-    a point's peak memory for local admission control.
+    a point's peak memory for local admission control; ``label`` names the progress bar.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -84,20 +84,20 @@ def execute(points: list[Point], folder: Path, evaluate: Callable, args: tuple =
              f" on {scheduler}" if scheduler else f" with {workers} worker{'s' * (workers > 1)}")
     if todo:
         if scheduler:
-            _run_dask(todo, folder, evaluate, args, scheduler, finished)
+            _run_dask(todo, folder, evaluate, args, scheduler, finished, label)
         elif workers <= 1:
             for k, point in enumerate(todo, 1):
                 finished[point.id] = _store(folder, point, evaluate(point, *args))
-                _done(point, len(finished), len(points))
+                _done(point, len(finished), len(points), label)
         else:
             _run_pool(todo, folder, evaluate, args, workers, memory_bytes, memory_budget_bytes, finished,
-                      len(points))
+                      len(points), label)
     return [finished[p.id] for p in points]
 
 
-def _done(point: Point, finished: int, total: int) -> None:
+def _done(point: Point, finished: int, total: int, label: str = "sweep points") -> None:
     log.info("point done (%d of %d finished): %s", finished, total, point.label,
-             extra={"progress": ("sweep points", finished, total)})
+             extra={"progress": (label, finished, total)})
 
 
 def _limit_threads(threads: int) -> None:
@@ -110,7 +110,7 @@ def _limit_threads(threads: int) -> None:
     threadpool_limits(limits=threads)
 
 
-def _run_pool(todo, folder, evaluate, args, workers, memory_bytes, budget, finished, total) -> None:
+def _run_pool(todo, folder, evaluate, args, workers, memory_bytes, budget, finished, total, label) -> None:
     import psutil
 
     budget = budget or 0.8 * psutil.virtual_memory().available
@@ -137,7 +137,7 @@ def _run_pool(todo, folder, evaluate, args, workers, memory_bytes, budget, finis
             for future in done:
                 point = running.pop(future)
                 finished[point.id] = _store(folder, point, _result(future, point))
-                _done(point, len(finished), total)
+                _done(point, len(finished), total, label)
 
 
 def _result(future, point: Point) -> dict:
@@ -147,7 +147,7 @@ def _result(future, point: Point) -> dict:
         raise UserError(f"sweep point {point.label}: {exc}") from None
 
 
-def _run_dask(todo, folder, evaluate, args, scheduler, finished) -> None:
+def _run_dask(todo, folder, evaluate, args, scheduler, finished, label="sweep points") -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -163,4 +163,4 @@ def _run_dask(todo, folder, evaluate, args, scheduler, finished) -> None:
         for future in as_completed(futures):
             point = futures[future]
             finished[point.id] = _store(folder, point, _result(future, point))
-            _done(point, len(finished), total)
+            _done(point, len(finished), total, label)
