@@ -29,7 +29,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio
+from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio, strain_ratio
 from femstudy.fe.post import quadrature_points, stress_projection, von_mises
 from femstudy.femur_mesh import CORTICAL
 from femstudy.hole.samples import hole_distance, offset_samples
@@ -51,7 +51,10 @@ class HoleMeasure:
     location_distance_mm : that point's distance from the hole surface
     max_principal_stress_MPa, min_principal_stress_MPa : extreme principal stresses
     max_principal_strain, min_principal_strain : extreme principal strains [-]
-    strength_ratio : smallest load factor to failure (femstudy.failure) over the set
+    strength_ratio : smallest load factor to failure by the stress criteria (femstudy.failure:
+           Tsai–Wu for cortical, von Mises for cancellous bone) over the set
+    strain_ratio : smallest load factor to the cortical maximum principal strain criterion
+           (femstudy.failure.strain_ratio) over the set's cortical points (inf without any)
     points : how many points of the set lie in bone
     """
 
@@ -68,6 +71,7 @@ class HoleMeasure:
     max_principal_strain: float
     min_principal_strain: float
     strength_ratio: float
+    strain_ratio: float
     points: int
 
     def row(self) -> dict:
@@ -91,7 +95,7 @@ def _tensor(voigt: np.ndarray, shear_factor: float) -> np.ndarray:
 class _PointValues:
     """Measured points (n, 3) [mm], their distance from the hole [mm] (n,), and per point and
     loading (n, k): von Mises [MPa], extreme principal stresses [MPa] and strains, and the
-    strength ratio (femstudy.failure)."""
+    strength and strain ratios (femstudy.failure)."""
 
     points: np.ndarray
     distance: np.ndarray
@@ -101,7 +105,7 @@ class _PointValues:
     strain_max: np.ndarray
     strain_min: np.ndarray
     strength_ratio: np.ndarray
-
+    strain_ratio: np.ndarray
 
     def subset(self, chosen: np.ndarray) -> _PointValues:
         return _PointValues(*(getattr(self, f.name)[chosen] for f in fields(self)))
@@ -115,8 +119,9 @@ def _point_values(points, distance, stress, D, region, long_axis) -> _PointValue
     vm = von_mises(stress)  # (n, k)
     cortical = region == CORTICAL
     ratio = np.where(cortical[:, None], cortical_strength_ratio(stress, long_axis), cancellous_strength_ratio(vm))
+    strained = np.where(cortical[:, None], strain_ratio(principal_strain[..., -1], principal_strain[..., 0]), np.inf)
     return _PointValues(points, distance, vm, principal_stress[..., -1], principal_stress[..., 0],
-                        principal_strain[..., -1], principal_strain[..., 0], ratio)
+                        principal_strain[..., -1], principal_strain[..., 0], ratio, strained)
 
 
 def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure]:
@@ -126,7 +131,8 @@ def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure
         return [HoleMeasure(name, **context, von_mises_MPa=np.nan, location_mm=(np.nan,) * 3,
                             location_distance_mm=np.nan, max_principal_stress_MPa=np.nan,
                             min_principal_stress_MPa=np.nan, max_principal_strain=np.nan,
-                            min_principal_strain=np.nan, strength_ratio=np.nan, points=0) for name in loadings]
+                            min_principal_strain=np.nan, strength_ratio=np.nan, strain_ratio=np.nan, points=0)
+                for name in loadings]
     vm = values.von_mises
     out = []
     for j, name in enumerate(loadings):
@@ -137,7 +143,8 @@ def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure
                                min_principal_stress_MPa=float(values.stress_min[:, j].min()),
                                max_principal_strain=float(values.strain_max[:, j].max()),
                                min_principal_strain=float(values.strain_min[:, j].min()),
-                               strength_ratio=float(values.strength_ratio[:, j].min()), points=len(points)))
+                               strength_ratio=float(values.strength_ratio[:, j].min()),
+                               strain_ratio=float(values.strain_ratio[:, j].min()), points=len(points)))
     return out
 
 
