@@ -42,7 +42,7 @@ def hide(monkeypatch, *packages):
 
 def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, caplog):
     K, b, B = problem
-    hide(monkeypatch, "pypardiso", "sksparse.cholmod")
+    hide(monkeypatch, "mkl", "sksparse.cholmod")
     assert linsolve.available() == ["superlu", "amg"]
     with caplog.at_level(logging.INFO, logger="femstudy"):
         factor = linsolve.factorize(K, near_null=B)
@@ -51,11 +51,11 @@ def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, caplog):
     assert np.linalg.norm(K @ factor.solve(b) - b) < 1e-10 * np.linalg.norm(b)
     # large problems go to AMG-CG, whose memory grows linearly, rather than to SuperLU
     assert linsolve.choose(10 * linsolve.SUPERLU_MAX_DOFS) == ["amg", "superlu"]
-    hide(monkeypatch, "pypardiso", "sksparse.cholmod", "pyamg")
+    hide(monkeypatch, "mkl", "sksparse.cholmod", "pyamg")
     assert linsolve.choose(10 * linsolve.SUPERLU_MAX_DOFS) == ["superlu"]
 
 
-@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="pypardiso not installed")
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
 def test_pardiso_that_does_not_fit_gives_way(problem, monkeypatch, caplog):
     K, b, B = problem
     monkeypatch.setattr(linsolve, "available_memory_bytes", lambda: 1024)
@@ -72,6 +72,6 @@ def test_solver_choice_can_be_forced_and_is_checked(problem, monkeypatch):
     assert linsolve.factorize(K, "superlu").method == "superlu"
     with pytest.raises(UserError, match="unknown linear solver 'mumps'"):
         linsolve.factorize(K, "mumps")
-    hide(monkeypatch, "pypardiso")
+    hide(monkeypatch, "mkl")
     with pytest.raises(UserError, match="'pardiso' is not installed"):
         linsolve.factorize(K, "pardiso")
