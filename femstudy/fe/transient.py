@@ -43,7 +43,6 @@ from typing import Protocol
 import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
-from scipy.signal import lfilter, lfiltic
 
 from femstudy.errors import require
 from femstudy.fe import linsolve
@@ -321,6 +320,8 @@ def _modal_newmark(Kr, Mr, Pr, A, dt, damping, state):
     v_n + v_{n−1} = (2/Δt)(q_n − q_{n−1}), accelerations from the equation of motion.
     Returns reduced (y, v, a), each (m, n_steps), in the coordinates of Kr, Mr.
     """
+    from scipy.signal import lfilter, lfiltic  # 0.5–1 s to import: only when a march runs
+
     alpha, beta_r = damping
     omega2, Phi = scipy.linalg.eigh(Kr, Mr)
     omega2 = np.maximum(omega2, 0.0)
