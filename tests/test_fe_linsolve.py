@@ -5,6 +5,7 @@ import logging
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from fe_cases import clamped_both_ends, tube
 from femstudy.errors import UserError
@@ -75,3 +76,52 @@ def test_solver_choice_can_be_forced_and_is_checked(problem, monkeypatch):
     hide(monkeypatch, "mkl")
     with pytest.raises(UserError, match="'pardiso' is not installed"):
         linsolve.factorize(K, "pardiso")
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+def test_single_precision_factor_refines_to_the_double_precision_answer(problem):
+    K, b, B = problem
+    single, double = linsolve.factorize(K, "pardiso"), linsolve.factorize(K, "pardiso", precision="double")
+    assert (single.precision, double.precision) == ("single", "double")
+    x, y = single.solve(b), double.solve(b)
+    assert single.refinements >= 2 and double.refinements == 0  # one single-precision solve is far off
+    np.testing.assert_allclose(x, y, rtol=0, atol=1e-11 * np.abs(y).max())
+    assert np.linalg.norm(K @ x - b) < 1e-12 * np.linalg.norm(b)
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+def test_a_stalled_refinement_factorises_again_in_double_precision(problem, monkeypatch, caplog):
+    K, b, B = problem
+    factor = linsolve.factorize(K, "pardiso")
+    monkeypatch.setattr(linsolve, "REFINE_RTOL", 0.0)   # never converged ...
+    monkeypatch.setattr(linsolve, "REFINE_FLOOR", 0.0)  # ... so it stalls at round-off
+    with caplog.at_level(logging.WARNING, logger="femstudy"):
+        x = factor.solve(b)
+    assert "factorising in double precision" in caplog.text and factor.precision == "double"
+    assert np.linalg.norm(K @ x - b) < 1e-12 * np.linalg.norm(b)
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+def test_pardiso_takes_node_blocks_or_entries_and_refuses_an_indefinite_matrix(problem):
+    from femstudy.fe import pardiso
+    K, b, B = problem
+    blocks = linsolve.pardiso_upper(K, np.float64)
+    assert blocks.format == "bsr" and blocks.blocksize == (3, 3)
+    entries = linsolve.upper_triangle(K)
+    assert abs(sp.triu(K) - entries).max() == 0 and abs(sp.triu(K) - sp.triu(blocks.tocsr())).max() == 0
+    answers = []
+    for upper in (blocks, entries):
+        handle = pardiso.SymmetricPositiveDefinite(upper, {})
+        handle.analyse()
+        handle.factorize()
+        answers.append(handle.solve(b))
+        handle.release()
+    np.testing.assert_allclose(answers[0], answers[1], rtol=0, atol=1e-9 * np.abs(answers[1]).max())
+    # scattered unknowns (no 3×3 structure) go as entries; −K has no Cholesky factor
+    order = np.random.default_rng(0).permutation(K.shape[0])
+    assert linsolve.pardiso_upper(sp.csr_matrix(K[order][:, order]), np.float64).format == "csr"
+    handle = pardiso.SymmetricPositiveDefinite(linsolve.upper_triangle(-K), {})
+    handle.analyse()
+    with pytest.raises(pardiso.PardisoError, match="not positive definite"):
+        handle.factorize()
+    handle.release()

@@ -44,6 +44,7 @@ MEMORY_FRACTION = 0.7
 REFINE_RTOL = 1e-12
 #: Corrections smaller than this (relative to x) that no longer shrink are round-off: done.
 REFINE_FLOOR = 1e-9
+PRECISIONS = ("single", "double")
 #: Most refinement steps before the matrix is factorised again in double precision.
 MAX_REFINEMENTS = 15
 
@@ -323,12 +324,15 @@ def choose(n: int, methods: list[str] | None = None) -> list[str]:
     return order
 
 
-def factorize(A, method: str = "auto", near_null: np.ndarray | None = None) -> Factor:
+def factorize(A, method: str = "auto", near_null: np.ndarray | None = None, precision: str = "single") -> Factor:
     """Set up a solver for the SPD matrix A [any units]; logs the method that ran.
 
     method    : "auto" or one of :data:`METHODS`
     near_null : (n, 6) rigid-body modes for AMG (ignored by the direct methods)
+    precision : PARDISO's factorisation, "single" (refined to double precision at every solve)
+                or "double" (one substitution per solve: cheaper for many solves)
     """
+    require(precision in PRECISIONS, f"unknown precision '{precision}': choose {' or '.join(PRECISIONS)}")
     require(method == "auto" or method in METHODS,
             f"unknown linear solver '{method}': choose auto or one of {', '.join(METHODS)}")
     A = sp.csr_matrix(A)
@@ -345,7 +349,7 @@ def factorize(A, method: str = "auto", near_null: np.ndarray | None = None) -> F
             continue
         try:
             if name == "pardiso":
-                factor = PardisoFactor(A, memory_limit_bytes=limit)
+                factor = PardisoFactor(A, memory_limit_bytes=limit, precision=precision)
             elif name == "cholmod":
                 factor = CholmodFactor(A)
             elif name == "superlu":

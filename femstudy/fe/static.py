@@ -85,7 +85,8 @@ def free_block(A: sp.csr_matrix, free: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((A.data[keep], number[A.indices[keep]], indptr), shape=(len(free), len(free)))
 
 
-def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Path | None = None) -> FactorizedSystem:
+def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Path | None = None,
+              precision: str = "single") -> FactorizedSystem:
     """Restrict the model to the free DOFs of ``bc`` and factorise K_ff.
 
     Parameters
@@ -100,6 +101,9 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
         Folder of kept solutions (:mod:`femstudy.fe.kept`): K_ff is then factorised only when
         a solve is not served by the solutions an earlier run kept for the same K_ff, and
         :meth:`~femstudy.fe.linsolve.Factor.close` stores the new ones.
+    precision : str
+        PARDISO's factorisation: "single" (half the memory and time, each solve refined to
+        double precision: best for a few solves) or "double" (best for many).
 
     Returns
     -------
@@ -113,7 +117,7 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
     K = free_block(system.K, bc.free)
 
     def make() -> linsolve.Factor:
-        return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free])
+        return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free], precision)
 
     return FactorizedSystem(system, bc, K, make() if keep is None else KeptSolutions(K, make, keep))
 
