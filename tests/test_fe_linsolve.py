@@ -81,7 +81,7 @@ def test_solver_choice_can_be_forced_and_is_checked(problem, monkeypatch):
 @pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
 def test_single_precision_factor_refines_to_the_double_precision_answer(problem):
     K, b, B = problem
-    single, double = linsolve.factorize(K, "pardiso"), linsolve.factorize(K, "pardiso", precision="double")
+    single, double = linsolve.factorize(K, "pardiso", precision="single"), linsolve.factorize(K, "pardiso")
     assert (single.precision, double.precision) == ("single", "double")
     x, y = single.solve(b), double.solve(b)
     assert single.refinements >= 2 and double.refinements == 0  # one single-precision solve is far off
@@ -92,7 +92,7 @@ def test_single_precision_factor_refines_to_the_double_precision_answer(problem)
 @pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
 def test_a_stalled_refinement_factorises_again_in_double_precision(problem, monkeypatch, caplog):
     K, b, B = problem
-    factor = linsolve.factorize(K, "pardiso")
+    factor = linsolve.factorize(K, "pardiso", precision="single")
     monkeypatch.setattr(linsolve, "REFINE_RTOL", 0.0)   # never converged ...
     monkeypatch.setattr(linsolve, "REFINE_FLOOR", 0.0)  # ... so it stalls at round-off
     with caplog.at_level(logging.WARNING, logger="femstudy"):

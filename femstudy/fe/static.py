@@ -86,7 +86,7 @@ def free_block(A: sp.csr_matrix, free: np.ndarray) -> sp.csr_matrix:
 
 
 def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Path | None = None,
-              precision: str = "single") -> FactorizedSystem:
+              precision: str = "double") -> FactorizedSystem:
     """Restrict the model to the free DOFs of ``bc`` and factorise K_ff.
 
     Parameters
@@ -102,8 +102,10 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
         a solve is not served by the solutions an earlier run kept for the same K_ff, and
         :meth:`~femstudy.fe.linsolve.Factor.close` stores the new ones.
     precision : str
-        PARDISO's factorisation: "single" (half the memory and time, each solve refined to
-        double precision: best for a few solves) or "double" (best for many).
+        PARDISO's factorisation: "double" (one substitution per solve: the choice for the
+        many solves of a transient, modal analysis or study) or "single" (half the memory and
+        about half the time, each solve refined to double precision in 5–6 substitutions: the
+        faster choice for a static analysis's one or two solves).
 
     Returns
     -------
