@@ -25,7 +25,7 @@ from femstudy.study.results import LoadingResult, comparison
 from femstudy.study.sensitivity import Sensitivity
 from femstudy.study.verification import Verification
 
-PACKAGES = ("numpy", "scipy", "scikit-fem", "pytetwild", "pyvista", "meshio", "pypardiso")
+PACKAGES = ("numpy", "scipy", "scikit-fem", "pytetwild", "pyvista", "meshio", "mkl")
 
 
 def versions() -> dict:
