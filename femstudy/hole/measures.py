@@ -148,8 +148,36 @@ def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure
     return out
 
 
-def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",)
-                      ) -> list[HoleMeasure]:
+@dataclass(frozen=True)
+class DistanceSamples:
+    """The points at one distance δ [mm] from the hole that lie in the bone of a station's local
+    mesh, located once (their elements depend only on the mesh): points (n, 3) [mm], element
+    (n,), and ``wall`` (n,) True beside the cylindrical wall."""
+
+    distance_mm: float
+    points: np.ndarray
+    element: np.ndarray
+    wall: np.ndarray
+
+
+def distance_samples(system, station, distances_mm) -> tuple[DistanceSamples, ...]:
+    """The sample points at each distance δ from the hole (module docstring), with the points
+    where the curve leaves the bone or crosses a material interface, located in ``system``'s
+    mesh; any solution on that mesh (other materials, other loads) is measured on them."""
+    from femstudy.hole.probe import MeshLocator
+
+    locator = MeshLocator(system)
+    out = []
+    for delta in distances_mm:
+        samples = offset_samples(station, delta).with_boundary_points(locator.label)
+        element = locator.locate(samples.points)[0]
+        inside = element >= 0
+        out.append(DistanceSamples(float(delta), samples.points[inside], element[inside], samples.of("wall")[inside]))
+    return tuple(out)
+
+
+def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",),
+                      samples: tuple[DistanceSamples, ...] | None = None) -> list[HoleMeasure]:
     """Measures over the points at each distance δ from the hole (module docstring).
 
     Parameters
@@ -160,6 +188,7 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     distances_mm : distances δ from the hole surface [mm]
     long_axis : (3,) the bone's long axis (cortical strength frame)
     loadings : k names of the columns of ``u``
+    samples : the points of :func:`distance_samples` on this mesh, when already located
 
     Returns
     -------
@@ -169,18 +198,19 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     --------
     >>> distance_measures(system, station, u, (0.5, 1.0), model.frame.up)  # doctest: +SKIP
     """
-    from femstudy.hole.probe import MeshLocator, point_probe
+    from femstudy.hole.probe import point_probe
 
     u = np.asarray(u, float).reshape(system.n_dofs, -1)
-    locator = MeshLocator(system)
+    located = {s.distance_mm: s for s in (distance_samples(system, station, distances_mm) if samples is None
+                                          else samples)}
     out = []
     for delta in distances_mm:
-        samples = offset_samples(station, delta).with_boundary_points(locator.label)
-        probe = point_probe(system, samples.points, locator=locator)
-        e = probe.element[probe.inside]
-        values = _point_values(probe.points[probe.inside], np.full(len(e), float(delta)), probe.stress(u)[probe.inside],
+        found = located[float(delta)]
+        e = found.element
+        probe = point_probe(system, found.points, e)
+        values = _point_values(found.points, np.full(len(e), float(delta)), probe.stress(u),
                                system.materials.D[system.materials.index[e]], system.region[e], long_axis)
-        for kind, chosen in (("distance", np.ones(len(e), bool)), ("wall", samples.of("wall")[probe.inside])):
+        for kind, chosen in (("distance", np.ones(len(e), bool)), ("wall", found.wall)):
             context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": kind,
                        "radius_mm": float(delta)}
             out += _measures(values.subset(chosen), context, loadings)

@@ -36,7 +36,7 @@ from femstudy.hole.dirichlet import factorize_prescribed
 from femstudy.hole.femur import femur_columns, smooth_columns, surface_columns
 from femstudy.hole.frame import HoleFrame
 from femstudy.hole.loads import hole_loads
-from femstudy.hole.measures import HoleMeasure, distance_measures, exclusion_measures
+from femstudy.hole.measures import HoleMeasure, distance_measures, distance_samples, exclusion_measures
 from femstudy.hole.mesh import Resolution, hole_mesh
 from femstudy.hole.probe import MeshLocator
 
@@ -126,6 +126,23 @@ class HoleInputs:
 
 
 @dataclass(frozen=True)
+class HoleScenario:
+    """An alternative measured on the same local meshes as the study's hole models, for its
+    dynamic loading: the global unit fields of another global model (``unit_fields``, (n_dofs,
+    2); None: the study's), other materials of the local models (None: the inputs'), another
+    spread of the cutting loads over the cone (``cone_traction``; None: the options'), another
+    clamped length left out of the exclusion measures (``clamp_length_mm``; None: the inputs'). The
+    meshes, the cut nodes' places in the femur mesh and the measures' points are shared; a
+    scenario of other materials costs one more factorisation, any other one more right-hand side."""
+
+    name: str
+    unit_fields: np.ndarray | None = None
+    materials: BoneMaterials | None = None
+    cone_traction: str | None = None
+    clamp_length_mm: float | None = None
+
+
+@dataclass(frozen=True)
 class StationRun:
     """One station: its loads, its size and cost.
 
@@ -164,6 +181,7 @@ class HoleResult:
         point [mm] (inf: solid bone to the depth cap); minus the deepest tip, the ligament
     bone_axis, bone_axis_evidence : the cortex's material and strength axis at the site and how
         it was found (:class:`HoleSite`)
+    scenarios : name → the dynamic loading's measures of each :class:`HoleScenario` asked for
     """
 
     options: HoleOptions
@@ -174,6 +192,7 @@ class HoleResult:
     axis_bottom_mm: float
     bone_axis: tuple = (0.0, 0.0, 1.0)
     bone_axis_evidence: dict | None = None
+    scenarios: dict | None = None
 
     @property
     def wall_element_mm(self) -> float:
@@ -289,6 +308,11 @@ class HoleSite:
     bone_axis: np.ndarray
     bone_axis_evidence: dict
 
+    def with_ligament(self, ligament_mm: float, drilled_depth_mm: float) -> "HoleSite":
+        """The same geometry with the stations of another ligament rule (:func:`station_tips`)."""
+        options = replace(self.options, ligament_mm=ligament_mm)
+        return replace(self, options=options, tips=station_tips(options, drilled_depth_mm, self.axis_bottom_mm))
+
     def turned(self, degrees: float) -> "HoleSite":
         """The same geometry with the local mesh turned by ``degrees`` about the drill axis (a
         replicate placement of the mesh, for measuring the discretisation noise of a maximum)."""
@@ -366,7 +390,8 @@ def hole_site(inputs: HoleInputs, femur, options: HoleOptions = HoleOptions()) -
 
 def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, options: HoleOptions = HoleOptions(),
                   solver: str = "auto", keep: Path | None = None, site: HoleSite | None = None,
-                  stations: tuple | None = None) -> HoleResult:
+                  stations: tuple | None = None, scenarios: tuple = (),
+                  locator: MeshLocator | None = None) -> HoleResult:
     """Stresses near the drilled hole at a few depth stations, driven by the global model.
 
     Parameters
@@ -390,6 +415,9 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
         The geometry (:func:`hole_site`) when already built, e.g. for another refinement.
     stations : tuple of int, optional
         Only these stations (negative numbers count from the deepest); default all.
+    scenarios : tuple of HoleScenario
+        Alternatives measured on the same meshes (:class:`HoleScenario`; ``HoleResult.scenarios``).
+    locator : :class:`~femstudy.hole.probe.MeshLocator` of ``system``, to reuse one built before
 
     Returns
     -------
@@ -417,8 +445,13 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
     heights = femur.mesh.points @ up
     static = tuple(float(x) for x in inputs.static_load)
     runs, measures = [], []
-    global_locator = MeshLocator(system)  # every station's cut nodes are found in the one femur mesh
+    global_locator = locator or MeshLocator(system)  # every station's cut nodes are found in the one femur mesh
     chosen = set(range(len(tips))) if stations is None else {k % len(tips) for k in stations}
+    scenarios = tuple(scenarios)
+    fields = np.hstack([unit_fields] + [s.unit_fields for s in scenarios if s.unit_fields is not None])
+    field_of = 1 + np.cumsum([0] + [s.unit_fields is not None for s in scenarios])  # field set of each scenario's own
+    tractions = list(dict.fromkeys([options.cone_traction] + [s.cone_traction for s in scenarios if s.cone_traction]))
+    of_scenarios = {s.name: [] for s in scenarios}
     for k, tip in enumerate(tips):
         if k not in chosen:
             continue
@@ -428,33 +461,67 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
         load = inputs.station_load(float(tip))
         t, F_cut, T_cut, F_evac, T_evac = (load.time_s, load.cutting_thrust_N, load.cutting_torque_Nmm,
                                            load.evacuation_thrust_N, load.evacuation_torque_Nmm)
-        cut = cut_boundary(system, unit_fields, local, station, locator=global_locator)
-        patterns = hole_loads(local, station, growth_exponent=inputs.growth_exponent,
-                              cone_traction=options.cone_traction)
-        unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
-        loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order
-                             [*static, *static, 0.0, 0.0]]).T  # (patch thrust, torque, 4 hole loads) × 2 loadings
-        u = unit @ loadings
-        measures += distance_measures(local, station, u, options.distances_mm, axis, LOADINGS)
+        cut = cut_boundary(system, fields, local, station, locator=global_locator)
+        patterns = np.hstack([hole_loads(local, station, growth_exponent=inputs.growth_exponent,
+                                         cone_traction=traction).patterns for traction in tractions])
+        samples = distance_samples(local, station, options.distances_mm)
         excluded = _excluded(local, cut.dofs, heights, up, inputs.clamp_length_mm, options.cut_margin_mm)
-        measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, axis, excluded, LOADINGS)
+        # (patch thrust, torque) on the cut faces and the 4 hole loads (HoleLoads.force order), per loading
+        dynamic = np.array([F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac])
+        static_loading = np.array([*static, *static, 0.0, 0.0])
+
+        def responses(field: int, traction: str, loading: np.ndarray) -> np.ndarray:
+            """Coefficients of the unit responses' columns for one field set, traction and loading."""
+            c = np.zeros(fields.shape[1] + 4 * len(tractions))
+            c[2 * field:2 * field + 2] = loading[:2]
+            at = fields.shape[1] + 4 * tractions.index(traction)
+            c[at:at + 4] = loading[2:]
+            return c
+
+        unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
+        u = unit @ np.column_stack([responses(0, options.cone_traction, dynamic),
+                                    responses(0, options.cone_traction, static_loading)])
+        measures += _station_measures(local, station, u, options, axis, excluded, samples, LOADINGS)
+        for materials in dict.fromkeys(s.materials for s in scenarios):  # one factorisation per materials
+            group = [(i, s) for i, s in enumerate(scenarios) if s.materials is materials]
+            if materials is not None:
+                local = assemble(station.mesh, materials, order=inputs.order, long_axis=axis)
+                unit, more = _unit_responses(local, cut, patterns, solver, keep)
+                factorisations += more
+            u = unit @ np.column_stack([responses(int(field_of[i]) if s.unit_fields is not None else 0,
+                                                  s.cone_traction or options.cone_traction, dynamic)
+                                        for i, s in group])
+            for j, (_, s) in enumerate(group):
+                held = excluded if s.clamp_length_mm is None else \
+                    _excluded(local, cut.dofs, heights, up, s.clamp_length_mm, options.cut_margin_mm)
+                of_scenarios[s.name] += _station_measures(local, station, u[:, j:j + 1], options, axis, held,
+                                                          samples, ("dynamic",))
         seconds = time.perf_counter() - start
         runs.append(StationRun(k, float(tip), t, F_cut, T_cut, F_evac, T_evac, local.n_dofs, len(cut.dofs), seconds,
                                cut.moved_mm, factorisations))
-        log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
+        log.info("hole station %d (tip %.2f mm): %d DOFs%s, %.1f s", k, tip, local.n_dofs,
+                 f", {len(scenarios)} alternatives" if scenarios else "", seconds)
     return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds, site.axis_bottom_mm,
-                      tuple(float(x) for x in axis), site.bone_axis_evidence)
+                      tuple(float(x) for x in axis), site.bone_axis_evidence,
+                      {name: tuple(found) for name, found in of_scenarios.items()} if scenarios else None)
+
+
+def _station_measures(local, station, u, options, axis, excluded, samples, loadings) -> list:
+    """Every measure of one station's solution ``u`` (n_dofs, one column per loading)."""
+    return (distance_measures(local, station, u, options.distances_mm, axis, loadings, samples)
+            + exclusion_measures(local, station, u, options.exclusion_radii_mm, axis, excluded, loadings))
 
 
 def _unit_responses(local, cut, patterns, solver, keep) -> tuple[np.ndarray, int]:
     """The local model's unit responses [mm] and the factorisations they took: the cut faces
-    under the global field of a unit patch thrust and torque, and each unit hole load with the
-    cut faces held. Any loading combines them, so kept solutions serve a study that changes only
-    the loads; the factorisation is released on return, before the measures are taken."""
-    n_cut, n_hole = cut.values.shape[1], patterns.patterns.shape[1]
+    under each global field (``cut.values``' columns), and each unit hole load (``patterns``'
+    columns) with the cut faces held. Any loading combines them, so kept solutions serve a study
+    that changes only the loads; the factorisation is released on return, before the measures
+    are taken."""
+    n_cut, n_hole = cut.values.shape[1], patterns.shape[1]
     prescribed = factorize_prescribed(local, cut.dofs, solver, keep)
     unit = prescribed.solve(np.hstack([cut.values, np.zeros((len(cut.dofs), n_hole))]),
-                            np.hstack([np.zeros((local.n_dofs, n_cut)), patterns.patterns]))
+                            np.hstack([np.zeros((local.n_dofs, n_cut)), patterns]))
     prescribed.fs.factor.close()
     return unit, prescribed.fs.factor.factorisations
 

@@ -28,6 +28,8 @@ from femstudy.meshing.regions import point_triangle_distance, thickness
 RAY_STEP_MM = 0.25
 #: Bisection steps on the cortex rule's crossing (RAY_STEP_MM / 2^20: round-off).
 BISECTIONS = 20
+#: Samples along each ray tried in one pass of :meth:`SiteSurface.cortex_crossing`.
+SAMPLES_PER_PASS = 8
 #: Radius of the surface patch kept around a drill site [mm]: the hole model (radius up to
 #: 20 mm, its top smoothed over 4 mm) and the depth of points 12 mm below its top, whose nearest
 #: surface lies within about that distance sideways.
@@ -120,18 +122,26 @@ class SiteSurface:
         d = np.asarray(direction, float)
         s = np.arange(RAY_STEP_MM / 2, reach_mm + RAY_STEP_MM, RAY_STEP_MM)
         x = starts[:, None, :] + s[None, :, None] * d
-        flat = x.reshape(-1, 3)
-        beyond = (self.depth_mm(flat) - self.thickness_mm(flat)).reshape(len(starts), len(s)) > 0
+        t = self.thickness_mm(x.reshape(-1, 3)).reshape(len(starts), len(s))
+        # a point s along the ray lies at most s below the surface: none before s = t(x) is beyond
+        # the cortex; the others are tried a few samples at a time, until each ray has crossed
+        possible, beyond = s[None, :] >= t, np.zeros((len(starts), len(s)), bool)
+        for j in range(0, len(s), SAMPLES_PER_PASS):
+            ray, step = np.nonzero(possible[:, j:j + SAMPLES_PER_PASS] & ~beyond.any(axis=1)[:, None])
+            step += j
+            beyond[ray, step] = self.depth_mm(x[ray, step]) - t[ray, step] > 0
         found = beyond.any(axis=1)
-        first = np.argmax(beyond, axis=1)
+        first = np.argmax(beyond[found], axis=1)
         lo = np.where(first > 0, s[np.maximum(first - 1, 0)], 0.0)
         hi = s[first]
         for _ in range(BISECTIONS):
             mid = 0.5 * (lo + hi)
-            p = starts + mid[:, None] * d
+            p = starts[found] + mid[:, None] * d
             out = self.depth_mm(p) - self.thickness_mm(p) > 0
             hi, lo = np.where(out, mid, hi), np.where(out, lo, mid)
-        return np.where(found, 0.5 * (lo + hi), np.inf)
+        crossing = np.full(len(starts), np.inf)
+        crossing[found] = 0.5 * (lo + hi)
+        return crossing
 
 
 #: Radius of the surface around the site whose normals give the local bone axis [mm].

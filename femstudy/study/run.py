@@ -158,10 +158,10 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         hole = None if analysis is None else analysis.result
         table = None
         if sensitivity_part is not None:
-            hole_baseline, variants = sensitivity_part.result()
-            table = sensitivity.sensitivity_table(variants, sensitivity.with_hole(baseline, hole_baseline),
+            runs = sensitivity_part.result()
+            table = sensitivity.sensitivity_table(runs.variants, sensitivity.with_hole(baseline, runs.baseline_hole),
                                                   sensitivity.uncertainties(analysis),
-                                                  -1 if hole is None else len(hole.stations) - 1)
+                                                  -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds)
         figures = None if files_part is None else files_part.result()
         waited = time.perf_counter()
         solver_record = SolverRecord(model.system.order, model.system.n_dofs, fs.method,

@@ -24,7 +24,9 @@ Choices of the global model (clamps, cortex, modulus) need their own stiffness m
 factorised once and kept like the study's (:mod:`femstudy.fe.kept`: a repeated study factorises
 none of them). The near-hole answers are compared at the deepest station, where the drill is
 closest to breakthrough and the measures have their largest values, baseline and alternatives
-alike. A choice whose alternative cannot be computed (a local model that no longer fits the
+alike; the alternatives that keep the local meshes are measured on the baseline's meshes and
+points, one factorisation per material and two right-hand sides per global field (:func:`run_variants`).
+A choice whose alternative cannot be computed (a local model that no longer fits the
 bone) is reported as such. Units: mm, Hz, MPa, %.
 """
 
@@ -167,12 +169,6 @@ def hole_answers(result, options) -> dict:
     return out
 
 
-def at_station(result, station: int):
-    """The HoleResult restricted to one station's measures."""
-    return replace(result, measures=tuple(m for m in result.measures if m.station == station),
-                   stations=tuple(s for s in result.stations if s.station == station))
-
-
 def baseline_answers(fs, model, loading, frequency_Hz: float | None) -> Answers:
     """The baseline's global answers, computed like the variants' (quasi-static deflections
     over the dynamic loading; the lowest frequency); :func:`with_hole` adds the near-hole ones."""
@@ -189,9 +185,10 @@ def with_hole(answers: Answers, hole_values: dict | None) -> Answers:
 
 @dataclass(frozen=True)
 class Variant:
-    """One choice's alternative computed: its answers, what it cost [s], and why it could not be
-    computed (``failed``: the alternative's model is refused, e.g. a local model that no longer
-    fits the bone; its answers are then NaN)."""
+    """One choice's alternative computed: its answers, what it cost on its own [s] (its global
+    model, or its own hole model), and why it could not be computed (``failed``: the
+    alternative's model is refused, e.g. a local model that no longer fits the bone; its answers
+    are then NaN)."""
 
     choice: Choice
     answers: Answers
@@ -199,60 +196,106 @@ class Variant:
     failed: str = ""
 
 
-def run_variants(case, model, loading, unit_fields: np.ndarray, solver: str, keep, cache_dir, hole: bool,
-                 modes: bool) -> tuple:
-    """Every choice's alternative for ``case`` (its GlobalModel ``model``, CaseLoading
-    ``loading`` and the baseline's global field per unit patch thrust and torque,
-    ``unit_fields``): the deflections, the lowest frequency when ``modes``, and the near-hole
-    answers at the deepest station when ``hole`` (module docstring). Returns the baseline's
-    near-hole answers (computed like the alternatives') and one :class:`Variant` per choice."""
+@dataclass(frozen=True)
+class Variants:
+    """Every choice's alternative (:func:`run_variants`): the baseline's near-hole answers,
+    one :class:`Variant` per choice, and the wall time of the hole model the baseline and the
+    alternatives that keep its meshes share [s]."""
+
+    baseline_hole: dict
+    variants: tuple
+    shared_seconds: float
+
+
+def _global_alternative(choice, case, model, amplitudes, solver, keep, cache_dir, modes: bool):
+    """A global-model choice's deflections (and f1) and its unit fields (n_dofs, 2), with the
+    materials of its local models (None: the case's)."""
     from femstudy import fe
     from femstudy.casefile import with_overrides
     from femstudy.study.global_model import prepare
+
+    variant = with_overrides(case, choice.overrides, what="sensitivity")
+    clamps_only = set(choice.overrides) == {"clamps.length_mm"}
+    variant_model = model.clamped(variant) if clamps_only else prepare(variant, cache_dir)
+    fs = variant_model.factorize(solver, keep)
+    values = quasi_static_peaks(fs, variant_model.patch, variant_model.channels, amplitudes)
+    if modes:
+        values["f1_Hz"] = float(fe.solve_modal(fs, k=1).frequency_Hz[0])
+    fields = fs.bc.expand(fs.factor.solve(variant_model.patch.patterns[fs.bc.free]))
+    fs.factor.close()
+    return values, fields, None if clamps_only else variant.materials.to_fe(), variant.clamps.length_mm
+
+
+def run_variants(case, model, loading, unit_fields: np.ndarray, solver: str, keep, cache_dir, hole: bool,
+                 modes: bool) -> Variants:
+    """Every choice's alternative for ``case`` (its GlobalModel ``model``, CaseLoading
+    ``loading`` and the baseline's global field per unit patch thrust and torque,
+    ``unit_fields``): the deflections, the lowest frequency when ``modes``, and the near-hole
+    answers at the deepest station when ``hole`` (module docstring).
+
+    The alternatives that keep the local meshes (clamps, cortex, modulus, cone traction) are
+    measured with the baseline in one call of :func:`femstudy.hole.study.hole_stresses`, as
+    its :class:`~femstudy.hole.study.HoleScenario`: the meshes, the cut nodes' places and the
+    measures' points are built once, a global alternative adds two right-hand sides (its unit
+    fields on the cut faces) and a material one a factorisation. The ligament rule's
+    alternatives reuse the site's surfaces with other stations; the cut radius's build theirs."""
     from femstudy.errors import UserError
-    from femstudy.study.verification import analyse_hole
+    from femstudy.hole.probe import MeshLocator
+    from femstudy.hole.study import HoleScenario, hole_site, hole_stresses
 
     amplitudes = np.column_stack([loading.dynamic.thrust_N, loading.dynamic.torque_Nmm])
     options = case.loads.hole_options()
-
-    def hole_values(variant_model, fields, hole_options) -> dict:
-        inputs = loading.hole_inputs(variant_model.case.materials.to_fe(), case.mesh.order,
-                                     variant_model.case.clamps.length_mm)
-        result = analyse_hole(inputs, variant_model.femur, variant_model.system, fields, hole_options, solver, keep,
-                              verified=False, stations=(-1,)).result
-        return hole_answers(result, hole_options)
-
-    def _alternative(choice) -> dict:
-        """The answers of one choice's alternative."""
-        values = {}
-        variant_model, fields = model, unit_fields
-        if choice.global_model:
-            variant = with_overrides(case, choice.overrides, what="sensitivity")
-            variant_model = model.clamped(variant) if set(choice.overrides) == {"clamps.length_mm"} else \
-                prepare(variant, cache_dir)  # the clamps change no stiffness: the system is the baseline's
-            fs = variant_model.factorize(solver, keep)
-            values.update(quasi_static_peaks(fs, variant_model.patch, variant_model.channels, amplitudes))
-            if modes:
-                values["f1_Hz"] = float(fe.solve_modal(fs, k=1).frequency_Hz[0])
-            fields = fs.bc.expand(fs.factor.solve(variant_model.patch.patterns[fs.bc.free]))
-            fs.factor.close()
-        if hole:
-            values.update(hole_values(variant_model, fields, replace(options, **choice.hole)))
-        return values
-
-    baseline_hole = hole_values(model, unit_fields, options) if hole else {}
-    out = []
-    for choice in choices(case):
+    inputs = loading.hole_inputs(case.materials.to_fe(), case.mesh.order, case.clamps.length_mm)
+    done, scenarios = {}, []
+    for index, choice in enumerate(choices(case)):
         began = time.perf_counter()
         try:
-            values = _alternative(choice)
+            values = {}
+            if choice.global_model:
+                values, fields, materials, clamp = _global_alternative(choice, case, model, amplitudes, solver, keep,
+                                                                       cache_dir, modes)
+                if hole:
+                    scenarios.append(HoleScenario(str(index), fields, materials, None, clamp))
+            elif "cone_traction" in choice.hole:
+                scenarios.append(HoleScenario(str(index), cone_traction=choice.hole["cone_traction"]))
         except UserError as exc:
             log.warning("sensitivity: %s %s could not be computed: %s", choice.name, choice.setting, exc)
-            out.append(Variant(choice, Answers({}), time.perf_counter() - began, str(exc)))
+            done[index] = Variant(choice, Answers({}), time.perf_counter() - began, str(exc))
             continue
-        out.append(Variant(choice, Answers(values), time.perf_counter() - began))
-        log.info("sensitivity: %s %s, %.1f s", choice.name, choice.setting, out[-1].seconds)
-    return baseline_hole, tuple(out)
+        done[index] = Variant(choice, Answers(values), time.perf_counter() - began)
+    baseline_hole, shared = {}, 0.0
+    if hole:
+        began = time.perf_counter()
+        site, locator = hole_site(inputs, model.femur, options), MeshLocator(model.system)
+        result = hole_stresses(inputs, model.femur, model.system, unit_fields, options, solver, keep, site=site,
+                               stations=(-1,), scenarios=tuple(scenarios), locator=locator)
+        baseline_hole = hole_answers(result, options)
+        for scenario in scenarios:
+            index = int(scenario.name)
+            measured = hole_answers(replace(result, measures=result.scenarios[scenario.name]), options)
+            v = done[index]
+            done[index] = replace(v, answers=Answers({**v.answers.values, **measured}))
+        shared = time.perf_counter() - began
+        for index, choice in enumerate(choices(case)):
+            if choice.global_model or "cone_traction" in choice.hole or done[index].failed:
+                continue
+            began = time.perf_counter()
+            try:
+                if set(choice.hole) == {"ligament_mm"}:
+                    own = site.with_ligament(choice.hole["ligament_mm"], inputs.drilled_depth_mm)
+                else:
+                    own = hole_site(inputs, model.femur, replace(options, **choice.hole))
+                found = hole_stresses(inputs, model.femur, model.system, unit_fields, options, solver, keep,
+                                      site=own, stations=(-1,), locator=locator)
+                done[index] = Variant(choice, Answers(hole_answers(found, own.options)), time.perf_counter() - began)
+            except UserError as exc:
+                log.warning("sensitivity: %s %s could not be computed: %s", choice.name, choice.setting, exc)
+                done[index] = Variant(choice, Answers({}), time.perf_counter() - began, str(exc))
+    for index, choice in enumerate(choices(case)):
+        if not done[index].failed:
+            log.info("sensitivity: %s %s, %.1f s", choice.name, choice.setting, done[index].seconds)
+    log.info("sensitivity: the baseline and %d alternatives on the same local meshes, %.1f s", len(scenarios), shared)
+    return Variants(baseline_hole, tuple(done[i] for i in range(len(done))), shared)
 
 
 def uncertainties(analysis) -> dict:
@@ -274,9 +317,11 @@ def uncertainties(analysis) -> dict:
     return out
 
 
-def sensitivity_table(variants: tuple, baseline: Answers, uncertainty_percent: dict, station: int) -> Sensitivity:
+def sensitivity_table(variants: tuple, baseline: Answers, uncertainty_percent: dict, station: int,
+                      shared_seconds: float = 0.0) -> Sensitivity:
     """The table of ``variants`` (:func:`run_variants`) against the ``baseline``; an answer a
-    variant did not compute (the deflections of a hole-model choice) did not change."""
+    variant did not compute (the deflections of a hole-model choice) did not change. Its cost is
+    the variants' own and the ``shared_seconds`` of the hole model they share."""
     rows = []
     for v in variants:
         if v.failed:
@@ -286,4 +331,5 @@ def sensitivity_table(variants: tuple, baseline: Answers, uncertainty_percent: d
         changes = Answers(values).change(baseline)
         rows.append(Row(v.choice, {k: (x if k in v.answers.values else None) for k, x in changes.items()},
                         v.seconds))
-    return Sensitivity(baseline, tuple(rows), uncertainty_percent, station, sum(v.seconds for v in variants))
+    return Sensitivity(baseline, tuple(rows), uncertainty_percent, station,
+                       shared_seconds + sum(v.seconds for v in variants))

@@ -242,11 +242,14 @@ def analyse_hole(inputs, femur, system, unit_fields, options, solver: str = "aut
     from femstudy.errors import UserError
     from femstudy.hole.study import hole_site, hole_stresses
 
+    from femstudy.hole.probe import MeshLocator
+
     site = hole_site(inputs, femur, options)
+    locator = MeshLocator(system)  # one for every level: the cut nodes are found in the one femur mesh
 
     def run_level(level_options, level_site, level_stations=stations):
         return hole_stresses(inputs, femur, system, unit_fields, level_options, solver, keep, site=level_site,
-                             stations=level_stations)
+                             stations=level_stations, locator=locator)
 
     runs = []
 
