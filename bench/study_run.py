@@ -78,6 +78,8 @@ def main() -> None:
     parser.add_argument("--no-resolved", action="store_true",
                         help="skip the 30,000-step run (an earlier version would try to hold every step)")
     parser.add_argument("--timeout-s", type=float, default=600.0, help="a run is killed after this (600)")
+    parser.add_argument("--quick", action="store_true",
+                        help="only the cold run, the bare static solve at 8 mm and the cached run")
     args = parser.parse_args()
     tree = args.tree.resolve()
     rows = []
@@ -108,26 +110,30 @@ def main() -> None:
         timed("cold run (empty mesh cache)", femstudy_command(tree, *run), repeats=1)
         static8 = timed("bare static solve, 8 mm", bare_static(8.0, work, cache), cwd=REPO)
         cached = timed("cached run", femstudy_command(tree, *run))
-        if "--serial" in (tree / "femstudy/commands/run.py").read_text():  # a tree whose study forks lanes
+        if args.quick:
+            rows.append(("(--quick: the other measurements not run)", float("nan"), float("nan"), float("nan"), ""))
+        if not args.quick and "--serial" in (tree / "femstudy/commands/run.py").read_text():  # lanes
             timed("cached run, one process (--serial)", femstudy_command(tree, *run, "--serial"))
         factorising = None
-        if "no-kept-solutions" in (tree / "femstudy/commands/run.py").read_text():  # a tree with kept solutions
+        if not args.quick and "no-kept-solutions" in (tree / "femstudy/commands/run.py").read_text():
             factorising = timed("cached mesh, factorising (--no-kept-solutions)",
                                 femstudy_command(tree, *run, "--no-kept-solutions"))
-        static16 = timed("bare static solve, 16 mm", bare_static(16.0, work, cache), cwd=REPO)  # meshes 16 mm
-        resolved = variant(tree, work, "resolved", lambda s: re.sub(r"step_s\s*=.*", "step_s = 0.0001", s))
-        label = "resolved 16 mm (cached mesh): run, step 1e-4 s"
-        if args.no_resolved:
-            rows.append((label, float("nan"), float("nan"), float("nan"), "not run"))
-        else:
-            timed(label, femstudy_command(tree, "run", str(resolved), "--mesh-size", "16", "--out", str(work / "r16"),
-                                          "--quiet"), repeats=1)
-        fine = variant(tree, work, "fine", lambda s: re.sub(r"size_mm\s*=.*", "size_mm = 0.2", s, count=1))
-        timed("refusal: mesh.size_mm = 0.2", femstudy_command(tree, "run", str(fine), "--out", str(work / "f")),
-              repeats=1, expect=2, timeout_s=60.0)
-        tiny = variant(tree, work, "tiny", lambda s: re.sub(r"step_s\s*=.*", "step_s = 1e-7", s))
-        timed("refusal: step_s = 1e-7", femstudy_command(tree, "run", str(tiny), "--out", str(work / "t")),
-              repeats=1, expect=2, timeout_s=60.0)
+        static16 = (float("nan"), float("nan"))
+        if not args.quick:
+            static16 = timed("bare static solve, 16 mm", bare_static(16.0, work, cache), cwd=REPO)  # meshes 16 mm
+            resolved = variant(tree, work, "resolved", lambda s: re.sub(r"step_s\s*=.*", "step_s = 0.0001", s))
+            label = "resolved 16 mm (cached mesh): run, step 1e-4 s"
+            if args.no_resolved:
+                rows.append((label, float("nan"), float("nan"), float("nan"), "not run"))
+            else:
+                timed(label, femstudy_command(tree, "run", str(resolved), "--mesh-size", "16", "--out", str(work / "r16"),
+                                              "--quiet"), repeats=1)
+            fine = variant(tree, work, "fine", lambda s: re.sub(r"size_mm\s*=.*", "size_mm = 0.2", s, count=1))
+            timed("refusal: mesh.size_mm = 0.2", femstudy_command(tree, "run", str(fine), "--out", str(work / "f")),
+                  repeats=1, expect=2, timeout_s=60.0)
+            tiny = variant(tree, work, "tiny", lambda s: re.sub(r"step_s\s*=.*", "step_s = 1e-7", s))
+            timed("refusal: step_s = 1e-7", femstudy_command(tree, "run", str(tiny), "--out", str(work / "t")),
+                  repeats=1, expect=2, timeout_s=60.0)
 
     lines = [f"Study runs, femstudy from {args.label} ({time.strftime('%Y-%m-%d %H:%M')}, load average "
              f"{os.getloadavg()[0]:.2f} at the end; medians of {args.repeats} where repeated)", "",

@@ -238,9 +238,12 @@ class LoadsSpec(_Section):
     loading (its peak stress under the patch is mesh-dependent). ``refinement``,
     ``submodel_radius_mm`` and ``depth_cap_mm`` set the local model's mesh and extent,
     ``smoothing_mm`` the Gaussian smoothing of the bone surfaces it sees (0: none).
-    ``convergence``: a hole-convergence record (``bench/hole_convergence.py --json``, path
-    relative to the case file) whose verdicts decide which measures a failure margin may use
-    (:mod:`femstudy.study.verdicts`)."""
+    ``verify``: judge every near-hole measure in the run, by two coarser refinements of the local
+    models and replicate placements (:mod:`femstudy.study.verification`); its verdicts and
+    bands go with every stress and margin quoted. ``ligament_mm``: the least bone left ahead of
+    the deepest drill tip. ``cone_traction``: how the cutting loads spread over the drill-point
+    cone, "allotta" (a constant force per unit lip length, traction ∝ 1/r: Eqs 2.18–2.19) or
+    "uniform" (docs/hole.md)."""
 
     application: Literal["hole", "surface_patch"] = "hole"
     stations: int = Field(3, ge=1, le=20)
@@ -254,7 +257,20 @@ class LoadsSpec(_Section):
     submodel_radius_mm: float = Field(8.0, gt=2, le=50)
     depth_cap_mm: float = Field(12.0, gt=0, le=100)
     smoothing_mm: float = Field(1.0, ge=0, le=5)
-    convergence: Union[str, None] = None
+    ligament_mm: float = Field(0.5, gt=0, le=5)
+    cone_traction: Literal["allotta", "uniform"] = "allotta"
+    verify: bool = True
+
+    @model_validator(mode="before")
+    @classmethod
+    def _record_no_longer_read(cls, data):
+        if isinstance(data, dict) and "convergence" in data:
+            import logging
+
+            data = {k: v for k, v in data.items() if k != "convergence"}
+            logging.getLogger(__name__).warning(
+                "loads.convergence is no longer read: a run verifies its near-hole measures itself (loads.verify)")
+        return data
 
     @model_validator(mode="after")
     def _quoted_values_are_measured(self):
@@ -272,7 +288,8 @@ class LoadsSpec(_Section):
                            exclusion_radii_mm=tuple(self.exclusion_radii_mm),
                            exclusion_radius_mm=self.exclusion_radius_mm, headline_distance_mm=self.headline_distance_mm,
                            refinement=self.refinement, submodel_radius_mm=self.submodel_radius_mm,
-                           depth_cap_mm=self.depth_cap_mm, smoothing_mm=self.smoothing_mm)
+                           depth_cap_mm=self.depth_cap_mm, smoothing_mm=self.smoothing_mm,
+                           ligament_mm=self.ligament_mm, cone_traction=self.cone_traction)
 
 
 class TimeSpec(_Section):
@@ -290,7 +307,10 @@ class AnalysisSpec(_Section):
     """``resolved`` adds a transient whose step resolves the lowest mode
     (``steps_per_period`` steps per period), with the per-flute oscillation and breakthrough
     release, from ``resolved_lead_s`` before breakthrough (started from the quasi-static state
-    there) to 0.1 s past the release: the dynamic amplification near the peak loads."""
+    there) to 0.1 s past the release: the dynamic amplification near the peak loads.
+    ``sensitivity`` adds the one-at-a-time table of how much each modelling choice (clamp
+    length, cut radius, ligament rule, cortex model, cone traction, cortical modulus) moves the
+    answers (:mod:`femstudy.study.sensitivity`)."""
 
     transient: bool = True
     rayleigh_alpha_per_s: float = Field(0.0, ge=0, le=1e4)
@@ -300,6 +320,7 @@ class AnalysisSpec(_Section):
     resolved: bool = True
     steps_per_period: int = Field(20, ge=10, le=200)
     resolved_lead_s: float = Field(0.5, gt=0, le=3600)
+    sensitivity: bool = True
 
 
 class OutputSpec(_Section):
@@ -413,10 +434,6 @@ class Case(_Section):
         """The surface file, resolved against the case file's folder; None for the built-in femur."""
         return None if self.geometry.surface == "builtin" else self._resolve(self.geometry.surface)
 
-    def convergence_path(self) -> Path | None:
-        """The hole-convergence record (``loads.convergence``), resolved like the surface."""
-        return None if self.loads.convergence is None else self._resolve(self.loads.convergence)
-
     def _resolve(self, name: str) -> Path:
         path = Path(name).expanduser()
         return path if path.is_absolute() or self.source is None else self.source.parent / path
@@ -496,10 +513,6 @@ def check_references(case: Case, bones_dir: Path | None = None) -> None:
         load_bone_set(case.drilling.bone, bones_dir)
     except UserError as exc:
         raise UserError(f"{where}: drilling.bone: {exc}") from None
-    record = case.convergence_path()
-    if record is not None and not record.is_file():
-        raise UserError(f"{where}: loads.convergence: {record} does not exist "
-                        "(paths are relative to the case file's folder; bench/hole_convergence.py --json writes it)")
 
 
 def load_case(path: str | Path, bones_dir: Path | None = None) -> Case:

@@ -48,22 +48,6 @@ class Settings:
                    Path(bones) if bones else None, Path(logs) if logs else None)
 
 
-def name_mkl_library(environ=os.environ) -> None:
-    """Tell pypardiso where MKL's runtime library is (its documented ``PYPARDISO_MKL_RT``),
-    read from the ``mkl`` package's file list; otherwise pypardiso walks the whole environment
-    for it, 0.2 s for every solver object it makes."""
-    if "PYPARDISO_MKL_RT" in environ:
-        return
-    from importlib.metadata import PackageNotFoundError, files
-    try:
-        found = [f.locate() for f in files("mkl") or () if f.name.startswith("libmkl_rt")]
-    except PackageNotFoundError:
-        return
-    found = [path for path in found if path.exists()]
-    if found:
-        environ["PYPARDISO_MKL_RT"] = str(found[0].resolve())
-
-
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line and exit 2, like every user error."""
 
@@ -127,7 +111,6 @@ def main(argv: list[str] | None = None) -> int:
         # numpy's floating-point RuntimeWarnings are two lines each of library internals; what
         # they warn of (an overflow, a NaN) is judged by femstudy's own checks (docs/checks.md)
         warnings.simplefilter("ignore", RuntimeWarning)
-        name_mkl_library()
         console.install(quiet=getattr(args, "quiet", False))
         return int(args.run(args) or 0)
     except UserError as exc:

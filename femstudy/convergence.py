@@ -33,13 +33,19 @@ Verdicts, in order:
 - "not converging": the changes alternate in sign without shrinking (R ≤ −1) or grow beyond
   the noise (R at or above ln r21 / ln r32), there is no observed order, or it is under a
   quarter of the formal one;
-- "converged" when monotone with GCI_fine ≤ :data:`GCI_CONVERGED`, else "converging".
+- "converged" when monotone with GCI_fine ≤ :data:`GCI_CONVERGED` and an observed order no
+  higher than the formal one (within 10 %), else "converging": an order above the formal one
+  means the meshes are not in the asymptotic range (or errors cancel), and the GCI computed with
+  the formal order and the safety factor 3 is then a band, not a verdict.
+
+Within the noise, and in oscillatory convergence, no order is claimed (``observed_order`` is
+None): changes that small, or that alternate, do not resolve one.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -84,7 +90,10 @@ def observed_order(phi, h, max_iter: int = 200, tol: float = 1e-12) -> float | N
     s = math.copysign(1.0, e32 / e21)
     p = abs(math.log(abs(e32 / e21))) / math.log(r21)
     for _ in range(max_iter):
-        q_arg = (r21 ** p - s) / (r32 ** p - s)
+        denominator = r32 ** p - s
+        if denominator == 0:  # p = 0 with monotone changes: no order (equal changes on a ladder of equal ratios)
+            return None
+        q_arg = (r21 ** p - s) / denominator
         if q_arg <= 0:
             return None
         new = abs(math.log(abs(e32 / e21)) + math.log(q_arg)) / math.log(r21)
@@ -129,17 +138,19 @@ def assess(quantity: str, h, values, formal_order: float, singular: bool = False
     if singular:
         return result("singular", f"singular in the continuum (a load edge or re-entrant corner): it grows as the "
                                   f"mesh is refined and is never converged; {order_text}, spread {100 * spread:.2g} %")
+    apparent = "" if p is None else f"; apparent order {p:.2f}, not resolved"
     if spread <= noise:  # changes below the noise are not resolved: the noise bounds what is known
-        return result("converged" if noise <= GCI_CONVERGED else "converging",
-                      f"the three finest values agree within {100 * spread:.2f} %, inside the "
-                      f"{100 * noise:.2f} % remeshing noise (two meshes of one size differ that much); "
-                      "GCI column: that noise", extrapolated=f1, gci=noise)
+        return replace(result("converged" if noise <= GCI_CONVERGED else "converging",
+                              f"the three finest values agree within {100 * spread:.2f} %, inside the "
+                              f"{100 * noise:.2f} % remeshing noise (meshes of one size differ that much){apparent}; "
+                              "GCI column: that noise", extrapolated=f1, gci=noise), observed_order=None)
     if R < 0:
         if R > -1:  # oscillatory convergence: the swing shrinks under refinement
             u = 0.5 * spread
-            return result("converged" if u <= GCI_CONVERGED else "converging",
-                          f"oscillating with a shrinking swing (R = {R:.3g}, |R| < 1): oscillatory convergence, "
-                          f"uncertainty half the range of the three values, {100 * u:.2g} % (GCI column)", gci=u)
+            return replace(result("converged" if u <= GCI_CONVERGED else "converging",
+                                  f"oscillating with a shrinking swing (R = {R:.3g}, |R| < 1): oscillatory "
+                                  f"convergence{apparent}, uncertainty half the range of the three values, "
+                                  f"{100 * u:.2g} % (GCI column)", gci=u), observed_order=None)
         return result("not converging", f"oscillating (R = {R:.3g}, |R| >= 1) by more than the {100 * noise:.2f} % "
                                         "remeshing noise: the change alternates in sign and does not shrink")
     if R >= bound:
@@ -155,9 +166,11 @@ def assess(quantity: str, h, values, formal_order: float, singular: bool = False
     r21 = hh[1] / hh[0]
     extrapolated = (r21 ** used * f1 - f2) / (r21 ** used - 1)
     gci = safety * abs((f1 - f2) / f1) / (r21 ** used - 1) if f1 != 0 else None
-    flag = f"; above the formal order, capped at {used:g} (safety factor {safety:g})" if p > formal_order else (
-        f"; safety factor {safety:g}" if safety != 1.25 else "")
-    verdict = "converged" if gci is not None and gci <= GCI_CONVERGED else "converging"
+    above = p > 1.1 * formal_order
+    flag = (f"; above the formal order, not in the asymptotic range: GCI with order {used:g} and safety factor "
+            f"{safety:g} is a band, not a verdict" if above else
+            f"; safety factor {safety:g}" if safety != 1.25 else "")
+    verdict = "converged" if gci is not None and gci <= GCI_CONVERGED and not above else "converging"
     return result(verdict, f"monotone (R = {R:.3g} < {bound:.3g}), {order_text}{flag}", used, extrapolated, gci)
 
 

@@ -19,7 +19,8 @@ with X (longitudinal), Y (transverse) tension/compression strengths and S the sh
 strength ratio is the factor λ with F(λσ) = 1: λ = (−b + √(b² + 4a)) / (2a), a the quadratic
 and b the linear part of F(σ). Cancellous bone, isotropic and of widely varying strength, is
 judged by its von Mises stress against the Table 2-5 mean ultimate strength (7.56 MPa; range
-0.56–22.9 MPa, reported beside). docs/failure.md gives the choices.
+0.56–22.9 MPa, reported beside). Beside the stress criteria, cortical bone is also judged by
+the maximum principal strain criterion (:func:`strain_ratio`). docs/failure.md gives the choices.
 """
 
 from __future__ import annotations
@@ -73,6 +74,37 @@ def cortical_strength_ratio(stress: np.ndarray, long_axis, strength: CorticalStr
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = (-linear + np.sqrt(linear ** 2 + 4 * quadratic)) / (2 * quadratic)
     return np.where(quadratic > 0, ratio, np.inf)
+
+
+@dataclass(frozen=True)
+class CorticalStrainLimits:
+    """Limits of the maximum principal strain criterion for cortical bone [-]: the largest
+    principal strain against ``tension``, the smallest against −``compression``.
+
+    The values are the human femoral cortical tissue's yield strains of Bayraktar et al. (2004,
+    J Biomech 37:27–35), the limits with which Schileo et al. (2008, J Biomech 41:356–367)
+    predicted the fracture load and site of femurs tested to failure. The thesis (Table 2-4)
+    gives ultimate tensile strains only — 0.031 along the bone, 0.007 across it — and none in
+    compression; the tensile limit here is its transverse value to within 5 % (docs/failure.md).
+    """
+
+    tension: float = 0.0073
+    compression: float = 0.0104
+    source: str = ("maximum principal strain (Schileo et al. 2008) with the yield strains of Bayraktar et al. "
+                   "2004: 0.73 % tension, 1.04 % compression")
+
+
+def strain_ratio(max_principal_strain: np.ndarray, min_principal_strain: np.ndarray,
+                 limits: CorticalStrainLimits = CorticalStrainLimits()) -> np.ndarray:
+    """The load factor λ at which the maximum principal strain criterion is met:
+    λ = min(ε_t / ε_1, ε_c / (−ε_3)) over the terms that are loaded (ε_1 > 0, ε_3 < 0) [-];
+    inf where unstrained. Strains scale with the loads (linear elasticity)."""
+    e1 = np.asarray(max_principal_strain, float)
+    e3 = np.asarray(min_principal_strain, float)
+    with np.errstate(divide="ignore"):
+        tension = np.where(e1 > 0, limits.tension / np.where(e1 > 0, e1, 1.0), np.inf)
+        compression = np.where(e3 < 0, limits.compression / np.where(e3 < 0, -e3, 1.0), np.inf)
+    return np.minimum(tension, compression)
 
 
 def cancellous_strength_ratio(von_mises_MPa: np.ndarray, strength_MPa: float = thesis.CANCELLOUS_STRENGTH_MPA["mean"]

@@ -47,6 +47,8 @@ class DrillSite:
     outward_normal         : (3,) unit outward surface normal at the entry point
     direction              : (3,) unit drill axis, pointing into the bone
     cortical_thickness_mm  : cortex crossed along the drill axis from the entry point [mm]
+    beyond_cortex          : what the drill meets past the cortex: "canal" (no bone) or
+                             "cancellous" bone
     """
 
     name: str
@@ -54,6 +56,7 @@ class DrillSite:
     outward_normal: np.ndarray
     direction: np.ndarray
     cortical_thickness_mm: float
+    beyond_cortex: str = "canal"
 
 
 @dataclass(frozen=True)

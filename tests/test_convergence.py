@@ -57,6 +57,15 @@ def test_super_convergent_order_is_capped_and_flagged():
     assert a.gci_fine > 5 * 1.25 * abs(values[0] - values[1]) / values[0] / (r21 ** 4 - 1)
 
 
+def test_no_verdict_is_converged_at_an_order_above_the_formal_one():
+    """An observed order of 4 against the element's 2 means the meshes are not in the asymptotic
+    range: even a GCI under 5 % makes it "converging" (a band), not "converged"."""
+    h = [0.5, 0.75, 1.125]
+    a = assess("q", h, exact_series(h, phi0=10.0, c=0.01, p=4.0), formal_order=2)
+    assert a.observed_order > 2.2 and a.gci_fine < GCI_CONVERGED
+    assert a.verdict == "converging" and "not in the asymptotic range" in a.reason
+
+
 @pytest.mark.parametrize("values", [[10 * x ** -0.5 for x in (1.0, 2.0, 4.0)],  # grows as h -> 0
                                     [59.0, 50.8, 30.6],  # looked like order 9 on 8/12/16 mm meshes
                                     [20.0, 20.001, 20.002]])  # even when it barely moves

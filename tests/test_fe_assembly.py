@@ -128,3 +128,12 @@ def test_system_pickles_and_factorises_again():
     copy = pickle.loads(pickle.dumps(system))
     assert np.abs(u).max() > 0
     np.testing.assert_array_equal(solve_static(factorize(copy, bc), f), u)
+
+
+def test_free_blocks_are_the_restrictions_of_k_and_m_on_one_pattern():
+    system = assemble(two_region_bar())
+    fs = factorize(system, fix_facets(system, system.mesh.boundary_facets()[:3]), "superlu")
+    free = fs.bc.free
+    assert abs(fs.K - system.K[free][:, free]).max() == 0 and abs(fs.M - system.M[free][:, free]).max() == 0
+    assert np.array_equal(fs.K.indptr, fs.M.indptr) and np.array_equal(fs.K.indices, fs.M.indices)
+    assert fs.K.has_sorted_indices

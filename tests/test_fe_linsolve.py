@@ -5,6 +5,7 @@ import logging
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from fe_cases import clamped_both_ends, tube
 from femstudy.errors import UserError
@@ -42,7 +43,7 @@ def hide(monkeypatch, *packages):
 
 def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, caplog):
     K, b, B = problem
-    hide(monkeypatch, "pypardiso", "sksparse.cholmod")
+    hide(monkeypatch, "mkl", "sksparse.cholmod")
     assert linsolve.available() == ["superlu", "amg"]
     with caplog.at_level(logging.INFO, logger="femstudy"):
         factor = linsolve.factorize(K, near_null=B)
@@ -51,11 +52,11 @@ def test_pure_scipy_fallback_runs_and_says_so(problem, monkeypatch, caplog):
     assert np.linalg.norm(K @ factor.solve(b) - b) < 1e-10 * np.linalg.norm(b)
     # large problems go to AMG-CG, whose memory grows linearly, rather than to SuperLU
     assert linsolve.choose(10 * linsolve.SUPERLU_MAX_DOFS) == ["amg", "superlu"]
-    hide(monkeypatch, "pypardiso", "sksparse.cholmod", "pyamg")
+    hide(monkeypatch, "mkl", "sksparse.cholmod", "pyamg")
     assert linsolve.choose(10 * linsolve.SUPERLU_MAX_DOFS) == ["superlu"]
 
 
-@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="pypardiso not installed")
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
 def test_pardiso_that_does_not_fit_gives_way(problem, monkeypatch, caplog):
     K, b, B = problem
     monkeypatch.setattr(linsolve, "available_memory_bytes", lambda: 1024)
@@ -72,6 +73,55 @@ def test_solver_choice_can_be_forced_and_is_checked(problem, monkeypatch):
     assert linsolve.factorize(K, "superlu").method == "superlu"
     with pytest.raises(UserError, match="unknown linear solver 'mumps'"):
         linsolve.factorize(K, "mumps")
-    hide(monkeypatch, "pypardiso")
+    hide(monkeypatch, "mkl")
     with pytest.raises(UserError, match="'pardiso' is not installed"):
         linsolve.factorize(K, "pardiso")
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+def test_single_precision_factor_refines_to_the_double_precision_answer(problem):
+    K, b, B = problem
+    single, double = linsolve.factorize(K, "pardiso", precision="single"), linsolve.factorize(K, "pardiso")
+    assert (single.precision, double.precision) == ("single", "double")
+    x, y = single.solve(b), double.solve(b)
+    assert single.refinements >= 2 and double.refinements == 0  # one single-precision solve is far off
+    np.testing.assert_allclose(x, y, rtol=0, atol=1e-11 * np.abs(y).max())
+    assert np.linalg.norm(K @ x - b) < 1e-12 * np.linalg.norm(b)
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+def test_a_stalled_refinement_factorises_again_in_double_precision(problem, monkeypatch, caplog):
+    K, b, B = problem
+    factor = linsolve.factorize(K, "pardiso", precision="single")
+    monkeypatch.setattr(linsolve, "REFINE_RTOL", 0.0)   # never converged ...
+    monkeypatch.setattr(linsolve, "REFINE_FLOOR", 0.0)  # ... so it stalls at round-off
+    with caplog.at_level(logging.WARNING, logger="femstudy"):
+        x = factor.solve(b)
+    assert "factorising in double precision" in caplog.text and factor.precision == "double"
+    assert np.linalg.norm(K @ x - b) < 1e-12 * np.linalg.norm(b)
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+def test_pardiso_takes_node_blocks_or_entries_and_refuses_an_indefinite_matrix(problem):
+    from femstudy.fe import pardiso
+    K, b, B = problem
+    blocks = linsolve.pardiso_upper(K, np.float64)
+    assert blocks.format == "bsr" and blocks.blocksize == (3, 3)
+    entries = linsolve.upper_triangle(K)
+    assert abs(sp.triu(K) - entries).max() == 0 and abs(sp.triu(K) - sp.triu(blocks.tocsr())).max() == 0
+    answers = []
+    for upper in (blocks, entries):
+        handle = pardiso.SymmetricPositiveDefinite(upper, {})
+        handle.analyse()
+        handle.factorize()
+        answers.append(handle.solve(b))
+        handle.release()
+    np.testing.assert_allclose(answers[0], answers[1], rtol=0, atol=1e-9 * np.abs(answers[1]).max())
+    # scattered unknowns (no 3×3 structure) go as entries; −K has no Cholesky factor
+    order = np.random.default_rng(0).permutation(K.shape[0])
+    assert linsolve.pardiso_upper(sp.csr_matrix(K[order][:, order]), np.float64).format == "csr"
+    handle = pardiso.SymmetricPositiveDefinite(linsolve.upper_triangle(-K), {})
+    handle.analyse()
+    with pytest.raises(pardiso.PardisoError, match="not positive definite"):
+        handle.factorize()
+    handle.release()

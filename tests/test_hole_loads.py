@@ -120,3 +120,17 @@ def test_bad_load_options_are_user_errors():
         hole_loads(system, station, evacuation_thrust_on="flute")
     with pytest.raises(UserError, match="finite"):
         hole_loads(system, station, growth_exponent=np.nan)
+
+
+def test_allotta_cone_traction_is_a_constant_force_per_unit_lip_length():
+    """Allotta's model cuts a constant force per unit depth of the cone, so per unit lip length: the
+    share of the thrust inside radius a is a / R (a uniform traction gives (a / R)²)."""
+    station, system = station_system(THICKNESS, TIPS, 1, 2)
+    local = station.hole.frame.to_local(system.nodes)
+    inner = np.hypot(local[:, 0], local[:, 1]) < 0.5 * RADIUS
+    shares = {}
+    for traction in ("allotta", "uniform"):
+        thrust = hole_loads(system, station, cone_traction=traction).cutting_thrust.reshape(-1, 3)
+        shares[traction] = thrust[inner].sum(axis=0) @ station.hole.frame.axis
+    assert shares["allotta"] == pytest.approx(0.5, abs=0.03)
+    assert shares["uniform"] == pytest.approx(0.25, abs=0.03)

@@ -93,7 +93,10 @@ def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
 
     if system is None:
         system, patch, bc = setup(fe, model)
-    fs = fe.factorize(system, bc)
+    # one solve: a single-precision factor refined to double precision; a transient's several
+    # block solves: a double-precision factor (docs/solver.md)
+    fs = fe.factorize(system, bc, **({"precision": "single" if analysis == "static" else "double"}
+                                    if fe.__name__ == "femstudy.fe" else {}))
     if analysis == "static":
         force = model.static_thrust_N * patch.thrust + model.static_torque_Nmm * patch.torque
         return fe.solve_static(fs, force)

@@ -29,7 +29,10 @@ from femstudy.errors import require
 class DrillingConditions:
     """Operating point of one hole: feed, speed, cortex thickness, drill and bone set.
 
-    ``friction`` (μ_f, μ_w), when given, replaces the bone set's power law.
+    ``friction`` (μ_f, μ_w), when given, replaces the bone set's power law. ``beyond_cortex``
+    is what the drill meets once through the cortex: "cancellous" bone (cut at the bone set's
+    u2) or the "canal" (no bone: nothing to cut, u2 = 0, thesis §2.2 and Allotta's model with
+    the exit into air).
     """
 
     feed_mm_s: float
@@ -38,6 +41,7 @@ class DrillingConditions:
     bone: BoneSet = field(default_factory=lambda: builtin_bone_set("bovine"))
     drill: Drill = Drill()
     friction_override: tuple[float, float] | None = None
+    beyond_cortex: str = "cancellous"
 
     def __post_init__(self) -> None:
         feed_per_revolution(self.feed_mm_s, self.spindle_rpm)  # validates f and N
@@ -46,6 +50,13 @@ class DrillingConditions:
         if self.friction_override is not None:
             require(all(np.isfinite(m) and m > 0 for m in self.friction_override),
                     f"friction coefficients must be positive, got {self.friction_override}")
+        require(self.beyond_cortex in ("cancellous", "canal"),
+                f"beyond_cortex must be 'cancellous' or 'canal', got {self.beyond_cortex!r}")
+
+    @property
+    def u2_MPa(self) -> float:
+        """The specific cutting energy beyond the cortex [MPa]: the bone set's cancellous u2, 0 in the canal."""
+        return self.bone.u2_MPa if self.beyond_cortex == "cancellous" else 0.0
 
     @property
     def feed_per_rev_mm(self) -> float:

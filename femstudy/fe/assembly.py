@@ -17,6 +17,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -24,7 +25,7 @@ import skfem
 from skfem.quadrature import get_quadrature
 
 from femstudy.errors import require
-from femstudy.fe.materials import ElementMaterials, element_materials
+from femstudy.fe.materials import ElementMaterials, element_materials, stiffness_tensor
 from femstudy.femur_mesh import TetMesh
 from femstudy.materials import BoneMaterials
 
@@ -76,25 +77,35 @@ class FESystem:
     cells        : (n_tets, nbf) node indices of every element, scikit-fem's local order
     region       : (n_tets,) region code per element
     K, M         : (3 n_nodes)² CSR stiffness [N/mm] and consistent mass [tonne]; they share
-                   one sparsity pattern (M keeps explicit zeros), so K + c M is an array sum
+                   one sparsity pattern (M keeps explicit zeros), so K + c M is an array sum.
+                   M is formed from M_nodes when first asked for (a static solve never is)
     M_nodes      : (n_nodes)² CSR scalar mass [tonne]: M = M_nodes ⊗ I₃, so M u is
                    ``M_nodes @ u.reshape(-1, 3)`` with a ninth of the entries
+    dofs         : scikit-fem's vector DOF numbering (node n carries 3n…3n+2), made when asked for
     point_index  : for every point of the input TetMesh, its mesh vertex (−1 if unused)
     timings      : wall times [s] of the assembly phases
     """
 
     mesh: skfem.MeshTet
     ref: Reference
-    dofs: skfem.assembly.Dofs
     nodes: np.ndarray
     cells: np.ndarray
     region: np.ndarray
     materials: ElementMaterials
     K: sp.csr_matrix
-    M: sp.csr_matrix
     point_index: np.ndarray
     M_nodes: sp.csr_matrix
     timings: dict = field(default_factory=dict)
+
+    @cached_property
+    def M(self) -> sp.csr_matrix:
+        n_nodes = len(self.nodes)
+        return _block_matrix(self.M_nodes.data[:, None, None] * np.eye(3), self.M_nodes.indptr,
+                             self.M_nodes.indices, n_nodes)
+
+    @cached_property
+    def dofs(self) -> skfem.assembly.Dofs:
+        return skfem.assembly.Dofs(self.mesh, skfem.ElementVector(self.ref.element))
 
     @property
     def order(self) -> int:
@@ -143,33 +154,54 @@ def strain_matrices(mesh: skfem.MeshTet, ref: Reference, cells: np.ndarray):
 
 def _node_pattern(cells: np.ndarray, n_nodes: int):
     """Node-level CSR pattern (indptr, indices) and, for every (element, a, b) entry, the
-    position of the pair (cells[e, a], cells[e, b]) in it."""
-    nbf = cells.shape[1]
-    rows = np.repeat(cells, nbf, axis=1).ravel()
-    cols = np.tile(cells, (1, nbf)).ravel()
-    pattern = sp.csr_matrix((np.ones(len(rows), np.float32), (rows, cols)), shape=(n_nodes, n_nodes))
-    pattern.sum_duplicates()
-    keys = np.repeat(np.arange(n_nodes, dtype=np.int64), np.diff(pattern.indptr)) * n_nodes + pattern.indices
-    position = np.searchsorted(keys, rows.astype(np.int64) * n_nodes + cols).astype(np.int32)
-    return pattern.indptr, pattern.indices, position.reshape(len(cells), nbf * nbf)
+    position of the pair (cells[e, a], cells[e, b]) in it.
+
+    Row r lists, for every element corner (e, a) at node r, the element's nodes; each entry
+    carries its pair number (e nbf + a) nbf + b. Sorting the rows (scipy's per-row sort, which
+    carries the numbers along) puts equal columns side by side, so a running count of new
+    columns gives every pair its position: no search over the whole pattern.
+    """
+    n, nbf = cells.shape
+    corners = np.argsort(cells.ravel(), kind="stable")            # (e, a) = divmod(corner, nbf), by node
+    counts = np.bincount(cells.ravel(), minlength=n_nodes) * nbf
+    require(np.all(counts > 0), "every node must belong to an element")
+    rows = np.concatenate([[0], np.cumsum(counts)])
+    pairs = (corners[:, None] * nbf + np.arange(nbf)).ravel()
+    listed = sp.csr_matrix((pairs, cells[corners // nbf].ravel(), rows), shape=(n_nodes, n_nodes))
+    listed.has_sorted_indices = False
+    listed.sort_indices()
+    new = np.empty(len(pairs), bool)
+    new[0], new[1:] = True, listed.indices[1:] != listed.indices[:-1]
+    new[rows[:-1]] = True
+    running = np.cumsum(new) - 1
+    position = np.empty(len(pairs), np.int32)
+    position[listed.data] = running
+    indptr = np.concatenate([[0], running[rows[1:] - 1] + 1])
+    return indptr, listed.indices[new], position.reshape(n, nbf * nbf)
 
 
-#: Above this many distinct stiffness matrices (one per element with a per-element cortical
-#: axis) D B is formed element by element instead of one matrix product per material.
-GROUPED_MAX = 16
+def reference_stiffness(ref: Reference) -> np.ndarray:
+    """S[(a, b), (m, p)] = ∫_ref ∂N_a/∂ξ_m ∂N_b/∂ξ_p dξ, (nbf², 9): exact on the stiffness rule."""
+    S = np.einsum("q,qam,qbp->abmp", ref.weights, ref.grad, ref.grad)
+    return S.reshape(ref.nbf ** 2, 9)
 
 
-def _stress_matrices(B: np.ndarray, D: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """D B (n, nq, 6, m) for strain matrices B (n, nq, 6, m) and element stiffnesses D[index]."""
-    if len(D) > GROUPED_MAX:
-        return D[index][:, None] @ B
-    n, nq, _, m = B.shape
-    DB = np.empty_like(B)
-    for k in np.unique(index):
-        sel = index == k
-        columns = B[sel].transpose(0, 1, 3, 2).reshape(-1, 6)  # all (element, point, column) at once
-        DB[sel] = (columns @ D[k].T).reshape(-1, nq, m, 6).transpose(0, 1, 3, 2)
-    return DB
+def element_stiffness(S: np.ndarray, invJ: np.ndarray, det: np.ndarray, C: np.ndarray) -> np.ndarray:
+    """Element stiffnesses as 3×3 node blocks (n, nbf², 9) [N/mm], block (a, b) row-major in (i, j).
+
+    With ∂N_a/∂x_k = Σ_m ∂N_a/∂ξ_m J⁻¹_mk on an affine tet,
+
+        K_e[(a, i), (b, j)] = ∫ ∂N_a/∂x_k C_ikjl ∂N_b/∂x_l dV = Σ_mp S[(a, b), (m, p)] Ĉ[(m, p), (i, j)],
+        Ĉ_mpij = |det J| Σ_kl J⁻¹_mk C_ikjl J⁻¹_pl,
+
+    the elasticity tensor C (n, 3, 3, 3, 3) [MPa] pulled back to the reference element: one
+    (nbf² × 9) @ (9 × 9) product per element instead of Bᵀ D B at every quadrature point.
+    """
+    n = len(invJ)
+    A = invJ @ C.transpose(0, 2, 1, 3, 4).reshape(n, 3, 27)          # [e, m, (i, j, l)]: Σ_k J⁻¹_mk C_ikjl
+    A = A.reshape(n, 27, 3) @ invJ.transpose(0, 2, 1)                 # [e, (m, i, j), p]: Σ_l … J⁻¹_pl
+    C_ref = A.reshape(n, 3, 3, 3, 3).transpose(0, 1, 4, 2, 3).reshape(n, 9, 9) * np.abs(det)[:, None, None]
+    return S @ C_ref
 
 
 def _block_matrix(blocks: np.ndarray, indptr, indices, n_nodes: int) -> sp.csr_matrix:
@@ -220,35 +252,34 @@ def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int =
     scalar = skfem.assembly.Dofs(skmesh, ref.element)
     cells = np.ascontiguousarray(scalar.element_dofs.T)
     nodes = skmesh.p.T if order == 1 else np.concatenate([skmesh.p.T, skmesh.p.T[skmesh.edges].mean(axis=0)])
-    dofs = skfem.assembly.Dofs(skmesh, skfem.ElementVector(ref.element))
     n_nodes = len(nodes)
     t1 = time.perf_counter()
     indptr, indices, position = _node_pattern(cells, n_nodes)
     t2 = time.perf_counter()
 
     nbf, nnzb = ref.nbf, len(indices)
+    S = reference_stiffness(ref)
+    C = stiffness_tensor(mats.D)
     blocks, nodal_mass = np.zeros((nnzb, 9)), np.zeros(nnzb)
     for start in range(0, len(cells), CHUNK):
         part = np.arange(start, min(start + CHUNK, len(cells)))
         n, pairs = len(part), len(part) * nbf * nbf
-        B, dV = strain_matrices(skmesh, ref, part)
-        DB = _stress_matrices(B, mats.D, mats.index[part]) * dV[..., None, None]
-        Ke = B.reshape(n, -1, 3 * nbf).transpose(0, 2, 1) @ DB.reshape(n, -1, 3 * nbf)  # rows (a, c), cols (b, d)
-        Me = (mats.density[part] * 6 * dV.sum(axis=1))[:, None, None] * ref.mass  # 6 ΣdV = |det J|
+        invJ, det = jacobians(skmesh.p.T, skmesh.t.T[part])
+        Ke = element_stiffness(S, invJ, det, C[mats.index[part]])
+        Me = (mats.density[part] * np.abs(det))[:, None, None] * ref.mass
         # every element's (a, b) entries go to its node pair's block: a product with a 0/1
         # matrix, one column per (element, a, b), several times faster than np.bincount here
         scatter = sp.csc_matrix((np.ones(pairs), position[part].ravel(), np.arange(pairs + 1)), shape=(nnzb, pairs))
-        blocks += scatter @ Ke.reshape(n, nbf, 3, nbf, 3).transpose(0, 1, 3, 2, 4).reshape(pairs, 9)
+        blocks += scatter @ Ke.reshape(pairs, 9)
         nodal_mass += scatter @ Me.ravel()
     t3 = time.perf_counter()
     K = _block_matrix(blocks.reshape(nnzb, 3, 3), indptr, indices, n_nodes)
     del blocks
     M_nodes = sp.csr_matrix((nodal_mass, indices, indptr), shape=(n_nodes, n_nodes))
-    M = _block_matrix(nodal_mass[:, None, None] * np.eye(3), indptr, indices, n_nodes)
     t4 = time.perf_counter()
     timings = {"setup_s": t1 - t0, "pattern_s": t2 - t1, "elements_s": t3 - t2, "matrices_s": t4 - t3,
                "total_s": t4 - t0}
-    system = FESystem(skmesh, ref, dofs, nodes, cells, np.asarray(mesh.region), mats, K, M, point_index,
+    system = FESystem(skmesh, ref, nodes, cells, np.asarray(mesh.region), mats, K, point_index,
                       M_nodes, timings)
     log.info("assembled %s", system.summary())
     return system

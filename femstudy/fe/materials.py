@@ -83,10 +83,17 @@ def isotropic_stiffness(E_MPa: float, nu: float) -> np.ndarray:
 _VOIGT = np.array([[0, 5, 4], [5, 1, 3], [4, 3, 2]])  # tensor index pair -> Voigt index
 
 
+def stiffness_tensor(D: np.ndarray) -> np.ndarray:
+    """The elasticity tensor C_ijkl (..., 3, 3, 3, 3) [MPa] of Voigt stiffnesses D (..., 6, 6):
+    C_ijkl = D[V(ij), V(kl)] (engineering shear, so no factors)."""
+    D = np.asarray(D, float)
+    return D[..., _VOIGT.ravel()[:, None], _VOIGT.ravel()[None, :]].reshape(D.shape[:-2] + (3, 3, 3, 3))
+
+
 def rotate_stiffness(D: np.ndarray, R: np.ndarray) -> np.ndarray:
     """D' = D rotated by R: C'_ijkl = R_ia R_jb R_kc R_ld C_abcd, with the columns of R the
     local axes in global coordinates. Vectorised: R may be (..., 3, 3); returns (..., 6, 6)."""
-    C = D[np.ix_(_VOIGT.ravel(), _VOIGT.ravel())].reshape(3, 3, 3, 3)
+    C = stiffness_tensor(D)
     Cg = np.einsum("...ia,...jb,...kc,...ld,abcd->...ijkl", R, R, R, R, C, optimize=True)
     i, j = np.array([0, 1, 2, 1, 0, 0]), np.array([0, 1, 2, 2, 2, 1])
     return Cg[..., i[:, None], j[:, None], i[None, :], j[None, :]]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -29,15 +30,18 @@ class FactorizedSystem:
     system : the assembled :class:`~femstudy.fe.assembly.FESystem`
     bc     : the clamps (:class:`~femstudy.fe.constraints.Constraints`)
     K, M   : K_ff [N/mm] and M_ff [tonne], CSR on one shared pattern, so K + c M is a sum of
-             their data arrays
+             their data arrays; M_ff is formed when first asked for (a static solve never is)
     factor : the solver of K_ff (:class:`femstudy.fe.linsolve.Factor`)
     """
 
     system: FESystem
     bc: Constraints
     K: sp.csr_matrix
-    M: sp.csr_matrix
     factor: linsolve.Factor
+
+    @cached_property
+    def M(self) -> sp.csr_matrix:
+        return free_block(self.system.M, self.bc.free)
 
     @property
     def n_free(self) -> int:
@@ -66,19 +70,23 @@ class FactorizedSystem:
         return linsolve.rigid_body_modes(self.system.nodes)[self.bc.free]
 
 
-def _free_block(system: FESystem, bc: Constraints) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """K_ff and M_ff on one pattern: the positions in K.data of the free block's entries are
-    found once by restricting a matrix whose entries are their positions (K and M share theirs)."""
-    K = system.K
-    positions = sp.csr_matrix((np.arange(1, K.nnz + 1, dtype=float), K.indices, K.indptr), shape=K.shape)
-    free = positions[bc.free][:, bc.free].tocsr()
-    source = free.data.astype(np.int64) - 1
-    shape = (len(bc.free),) * 2
-    return (sp.csr_matrix((system.K.data[source], free.indices, free.indptr), shape=shape),
-            sp.csr_matrix((system.M.data[source], free.indices, free.indptr), shape=shape))
+def free_block(A: sp.csr_matrix, free: np.ndarray) -> sp.csr_matrix:
+    """A[free][:, free] of a CSR matrix with sorted indices, in one pass over its entries (the
+    rows and columns keep their order, so the result's indices stay sorted and K_ff and M_ff,
+    restricted from one pattern, share theirs)."""
+    n = A.shape[0]
+    number = np.full(n, -1, dtype=A.indices.dtype)
+    number[free] = np.arange(len(free), dtype=A.indices.dtype)
+    rows = np.repeat(number, np.diff(A.indptr))
+    keep = (rows >= 0) & (number[A.indices] >= 0)
+    del rows
+    kept = np.concatenate([[0], np.cumsum(keep, dtype=np.int64)])
+    indptr = np.concatenate([[0], np.cumsum(kept[A.indptr[free + 1]] - kept[A.indptr[free]])])
+    return sp.csr_matrix((A.data[keep], number[A.indices[keep]], indptr), shape=(len(free), len(free)))
 
 
-def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Path | None = None) -> FactorizedSystem:
+def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Path | None = None,
+              precision: str = "double") -> FactorizedSystem:
     """Restrict the model to the free DOFs of ``bc`` and factorise K_ff.
 
     Parameters
@@ -93,6 +101,11 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
         Folder of kept solutions (:mod:`femstudy.fe.kept`): K_ff is then factorised only when
         a solve is not served by the solutions an earlier run kept for the same K_ff, and
         :meth:`~femstudy.fe.linsolve.Factor.close` stores the new ones.
+    precision : str
+        PARDISO's factorisation: "double" (one substitution per solve: the choice for the
+        many solves of a transient, modal analysis or study) or "single" (half the memory and
+        about half the time, each solve refined to double precision in 5–6 substitutions: the
+        faster choice for a static analysis's one or two solves).
 
     Returns
     -------
@@ -103,12 +116,12 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
     >>> fs = factorize(system, bc)                      # doctest: +SKIP
     >>> u = solve_static(fs, patch.force(30.0, 40.0))   # doctest: +SKIP
     """
-    K, M = _free_block(system, bc)
+    K = free_block(system.K, bc.free)
 
     def make() -> linsolve.Factor:
-        return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free])
+        return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free], precision)
 
-    return FactorizedSystem(system, bc, K, M, make() if keep is None else KeptSolutions(K, make, keep))
+    return FactorizedSystem(system, bc, K, make() if keep is None else KeptSolutions(K, make, keep))
 
 
 def solve_static(fs: FactorizedSystem, f: np.ndarray) -> np.ndarray:

@@ -4,7 +4,13 @@ Each cut-face node (vertices and P2 mid-nodes of the ``cut_lateral`` and ``cut_b
 is located in the global mesh by :func:`femstudy.hole.probe.point_probe` and takes the global
 field's value there, u(x) = Σ_a N_a(ξ) u_a. A node just outside the global mesh takes the
 value of its closest cell's field at its closest point on the global mesh; farther than
-``tolerance_mm`` (2 mm) away it is a user error (the submodel leaves the bone). Nodes leave
+``tolerance_mm`` away it is a user error (the submodel leaves the bone). The default
+(:func:`default_tolerance_mm`) is the larger of 2 mm and a quarter of the median edge of the
+cut faces' elements or of the global cells the nodes leave to: a node leaves the bone by about
+a chord's sagitta, L²/(8R) ≤ L/4 for a bone radius R ≥ L/2, so coarse local elements at the
+cut (11 mm edges at refinement 0.4 on the 16 mm built-in femur, whose mid-nodes left the
+global mesh by 2.8 mm) are not refused for their own coarseness, while a submodel that leaves
+the bone by more than a quarter of an element still is. Nodes leave
 the global mesh by round-off on the surface facets the local top is ray-cast on, where P2
 mid-nodes of the local top's chords cut under curved facets, and where a column's bottom jumps
 between neighbours (a ray grazing the canal: the cells between them bridge the canal's
@@ -40,7 +46,36 @@ class CutBoundary:
     moved_mm: float
 
 
-def cut_boundary(global_system, fields: np.ndarray, local_system, station, tolerance_mm: float = 2.0,
+#: the smallest tolerance for a cut node outside the global mesh [mm]
+MIN_TOLERANCE_MM = 2.0
+
+
+def median_edge_mm(points: np.ndarray, simplices: np.ndarray) -> float:
+    """Median edge length [mm] of the simplices (k, n) (triangles or tetrahedra) over ``points`` (3, m).
+
+    Examples
+    --------
+    >>> median_edge_mm(np.eye(3) * 4.0, np.array([[0], [1], [2]]))  # an equilateral triangle
+    5.656854249492381
+    """
+    k = simplices.shape[0]
+    lengths = [np.linalg.norm(points[:, simplices[a]] - points[:, simplices[b]], axis=0)
+               for a in range(k) for b in range(a + 1, k)]
+    return float(np.median(np.concatenate(lengths)))
+
+
+def default_tolerance_mm(*edges_mm: float) -> float:
+    """max(:data:`MIN_TOLERANCE_MM`, ¼ of the largest of ``edges_mm``) [mm] (module docstring).
+
+    Examples
+    --------
+    >>> default_tolerance_mm(4.0, 11.4)
+    2.85
+    """
+    return max(MIN_TOLERANCE_MM, 0.25 * max(edges_mm))
+
+
+def cut_boundary(global_system, fields: np.ndarray, local_system, station, tolerance_mm: float | None = None,
                  locator: MeshLocator | None = None) -> CutBoundary:
     """Global displacement fields at the cut-face nodes of a station's local model.
 
@@ -50,7 +85,8 @@ def cut_boundary(global_system, fields: np.ndarray, local_system, station, toler
     fields : (n_dofs_global, k) global displacement fields [mm]
     local_system : :class:`femstudy.fe.FESystem` assembled on ``station.mesh``
     station : :class:`femstudy.hole.mesh.HoleStation`
-    tolerance_mm : how far outside the global mesh a cut node may lie
+    tolerance_mm : how far outside the global mesh a cut node may lie [mm]; by default
+        :func:`default_tolerance_mm` of the cut faces' elements and the global cells reached
     locator : :class:`~femstudy.hole.probe.MeshLocator` of ``global_system``, to reuse one built
         for several stations
 
@@ -75,8 +111,13 @@ def cut_boundary(global_system, fields: np.ndarray, local_system, station, toler
         cell, nearest = locator.closest(points[outside])
         distance = np.linalg.norm(nearest - points[outside], axis=1)
         moved = float(distance.max())
+        if tolerance_mm is None:
+            cut_facets = local_system.mesh.facets[:, facet_indices(local_system, station.cut_faces)]
+            global_mesh = global_system.mesh
+            tolerance_mm = default_tolerance_mm(median_edge_mm(local_system.mesh.p, cut_facets),
+                                                median_edge_mm(global_mesh.p, global_mesh.t[:4, np.unique(cell)]))
         require(moved <= tolerance_mm, f"the local model's cut boundary reaches {moved:.2f} mm outside the femur "
-                                       f"mesh (more than {tolerance_mm} mm): reduce the submodel radius or depth cap")
+                                       f"mesh (more than {tolerance_mm:.3g} mm): reduce the submodel radius or depth cap")
         points[outside], element[outside] = nearest, cell
         log.info("%d of %d cut nodes moved onto the femur mesh (at most %.3g mm)", len(outside), len(points), moved)
         probe = point_probe(global_system, points, element)

@@ -1,4 +1,15 @@
-"""Column tops, bottoms and regions of a local hole model, read off a global bone mesh.
+"""Column tops, bottoms and regions of a local hole model: read off the bone's surfaces
+(:func:`surface_columns`, what a study uses) or off a global bone mesh (:func:`femur_columns`).
+
+From the surfaces (:class:`SurfaceColumns`): every column's top is where it meets the user's
+outer surface around the site (:class:`femstudy.meshing.site_surface.SiteSurface`), its
+cortex ends where the cortex rule of the femur's regions puts the inner cortical surface
+(depth below the outer surface = t(s), measured exactly), and below that it ends in the canal
+(a free surface) or continues through cancellous bone to the global mesh's next boundary or the
+depth cap. None of it depends on the global mesh's size, so a station's geometry is the same on
+every global mesh (docs/hole.md).
+
+From a global mesh (:class:`FemurColumns`):
 
 Every column is a ray parallel to the drill axis d through a disk vertex (x₁, x₂) of the
 local frame. Its top is the first crossing of the bone's outer surface (triangles
@@ -21,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from femstudy.errors import UserError, require
-from femstudy.femur_mesh import CORTICAL, TetMesh
+from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
 from femstudy.hole.frame import HoleFrame
 from femstudy.meshing.landmarks import boundary_faces, region_interface
 
@@ -120,6 +131,13 @@ class FemurColumns:
         its ``top`` [mm] (inf where the column meets none)."""
         return self._first_below(xy, self.inner, top) if len(self.inner) else np.full(len(xy), np.inf)
 
+    def contains(self, points: np.ndarray) -> np.ndarray:
+        """(n,) True where a tetrahedron of the global mesh holds the point."""
+        import pyvista as pv
+
+        grid = pv.UnstructuredGrid({pv.CellType.TETRA: self.mesh.tets}, self.mesh.points)
+        return np.asarray(grid.find_containing_cell(np.atleast_2d(points)), dtype=np.int64).reshape(-1) >= 0
+
     def region(self, points: np.ndarray) -> np.ndarray:
         """(n,) global region code at each point (0 farther than the tolerance from the mesh)."""
         import pyvista as pv
@@ -162,6 +180,113 @@ def femur_columns(mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, dept
     inner, inner_codes = region_interface(mesh, CORTICAL)
     return FemurColumns(mesh, frame, outer_faces, boundary_faces(mesh), float(depth_cap_mm),
                         float(region_tolerance_mm), inner, inner_codes)
+
+
+#: Spacing of the grid on which the inner cortical surface is found and splined [mm].
+INTERFACE_GRID_MM = 0.5
+#: How far below the inner cortical surface a column is probed for bone: no global tet there is
+#: the canal [mm] (more than the global inner surface's own error, less than the thinnest
+#: cancellous layer the regions keep, ``canal.min_cancellous_mm`` = 3 mm by default).
+CANAL_PROBE_MM = 2.0
+
+
+@dataclass(frozen=True)
+class SurfaceColumns:
+    """Column tops, cortex and bottoms of a local hole model from the site's surfaces (module
+    docstring); the global mesh (``mesh_columns``) decides only between canal and cancellous
+    bone below the cortex and gives the bottoms in cancellous bone."""
+
+    surface: object
+    mesh_columns: FemurColumns
+    frame: HoleFrame
+    depth_cap_mm: float
+    inner_spline: object
+    cancellous_code: int
+
+    @property
+    def inner_codes(self) -> np.ndarray:
+        return np.array([self.cancellous_code])
+
+    @property
+    def lift(self) -> float:
+        return 2.0 * self.surface.radius_mm
+
+    def outer_depth(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) depth ζ of the outer surface on every column [mm], inf where a column misses it."""
+        xy = np.atleast_2d(np.asarray(xy, float))
+        origins = self.frame.to_global(np.column_stack([xy, np.full(len(xy), -self.lift)]))
+        return self.surface.entry(origins, self.frame.axis) - self.lift
+
+    def covers(self, xy: np.ndarray) -> np.ndarray:
+        return np.isfinite(self.outer_depth(xy))
+
+    def top(self, xy: np.ndarray) -> np.ndarray:
+        first = self.outer_depth(xy)
+        if not np.all(np.isfinite(first)):
+            raise UserError(f"{np.sum(~np.isfinite(first))} columns of the local model miss the bone's outer surface: "
+                            "the submodel radius reaches beyond the bone")
+        return first
+
+    def inner_depth(self, xy: np.ndarray, top: np.ndarray) -> np.ndarray:
+        """(n,) ζ of the inner cortical surface by the cortex rule (splined over the disk) [mm]."""
+        xy = np.atleast_2d(np.asarray(xy, float))
+        return top + self.inner_spline(xy[:, 0], xy[:, 1], grid=False)
+
+    def bottom(self, xy: np.ndarray, top: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) ζ of each column's bottom and (n,) True where it is a free surface: the inner
+        cortical surface over the canal, else the global mesh's next boundary below it or the cap."""
+        xy = np.atleast_2d(np.asarray(xy, float))
+        top = self.top(xy) if top is None else top
+        inner = self.inner_depth(xy, top)
+        probe = self.frame.to_global(np.column_stack([xy, inner + CANAL_PROBE_MM]))
+        canal = (inner < top + self.depth_cap_mm) & ~self.mesh_columns.contains(probe)
+        exit_depth = np.where(canal, inner, self.mesh_columns._first_below(xy, self.mesh_columns.boundary, inner))
+        free = exit_depth <= top + self.depth_cap_mm
+        return np.where(free, exit_depth, top + self.depth_cap_mm), free
+
+    def region(self, points: np.ndarray) -> np.ndarray:
+        """(n,) cortical where the cortex rule holds the point, else the cancellous code."""
+        points = np.atleast_2d(np.asarray(points, float))
+        cortical = self.surface.depth_mm(points) < self.surface.thickness_mm(points)
+        return np.where(cortical, CORTICAL, self.cancellous_code)
+
+
+def surface_columns(surface, mesh: TetMesh, outer_faces: np.ndarray, frame: HoleFrame, depth_cap_mm: float,
+                    radius_mm: float) -> SurfaceColumns:
+    """Columns of a local hole model of radius up to ``radius_mm`` from the site's surface patch
+    (:class:`femstudy.meshing.site_surface.SiteSurface`) and the cortex rule, the global
+    ``mesh`` (its ``outer_faces``) telling canal from cancellous bone below the cortex.
+
+    Examples
+    --------
+    >>> columns = surface_columns(model.surface, model.mesh, outer, frame, 12.0, 12.0)  # doctest: +SKIP
+    """
+    from scipy.interpolate import RectBivariateSpline
+
+    require(depth_cap_mm > 0, f"the depth cap must be positive, got {depth_cap_mm} mm")
+    require(radius_mm + depth_cap_mm < surface.radius_mm,
+            f"the local model ({radius_mm:g} mm wide, {depth_cap_mm:g} mm deep) reaches beyond the "
+            f"{surface.radius_mm:g} mm surface patch kept around the site")
+    raw = femur_columns(mesh, outer_faces, frame, depth_cap_mm)
+    axis = np.arange(-radius_mm - INTERFACE_GRID_MM, radius_mm + 1.5 * INTERFACE_GRID_MM, INTERFACE_GRID_MM)
+    X, Y = np.meshgrid(axis, axis, indexing="ij")
+    xy = np.column_stack([X.ravel(), Y.ravel()])
+    lift = 2.0 * surface.radius_mm
+    top = surface.entry(frame.to_global(np.column_stack([xy, np.full(len(xy), -lift)])), frame.axis) - lift
+    hit = np.isfinite(top)
+    below = np.full(len(xy), depth_cap_mm + 1.0)
+    starts = frame.to_global(np.column_stack([xy[hit], top[hit]]))
+    below[hit] = np.minimum(surface.cortex_crossing(starts, frame.axis, depth_cap_mm + 1.0), depth_cap_mm + 1.0)
+    if not hit.all():  # past the bone's edge: the nearest columns' values, so the spline stays smooth
+        from scipy.spatial import cKDTree
+
+        _, nearest = cKDTree(xy[hit]).query(xy[~hit])
+        below[~hit] = below[hit][nearest]
+    spline = RectBivariateSpline(axis, axis, below.reshape(X.shape), kx=3, ky=3)
+    entry = frame.to_global(np.zeros((1, 3)))
+    mid = 0.5 * sum(surface.canal_fractions)
+    code = CANCELLOUS_PROXIMAL if float(surface.frame.fraction(entry)[0]) < mid else CANCELLOUS_DISTAL
+    return SurfaceColumns(surface, raw, frame, float(depth_cap_mm), spline, code)
 
 
 @dataclass(frozen=True)

@@ -2,11 +2,17 @@
 
 Where the loads act (thesis §3.2.1 and docs/hole.md):
 
-(a) cutting thrust — the lips cut the bottom of the hole: a uniform traction along the drill
-    axis d on the exposed drill-point cone, t = d / A (A the cone's area), resultant 1 N·d.
-(b) cutting torque — tangential traction on the cone growing with the distance from the axis,
-    t = k d × (x − c) (c the cone's area centroid, on the axis for a whole cone),
-    k = 1 / ∫ |(x − c)⊥|² dA: moment 1 N·mm about d, no net force.
+(a) cutting thrust — the lips cut the bottom of the hole: a traction along the drill axis d on
+    the exposed drill-point cone with resultant 1 N·d. ``cone_traction = "allotta"`` (the
+    default): a constant force per unit length of lip, as Allotta's model has it (Eq 2.18
+    integrates a constant force per unit depth of the cone, and a lip's length grows with the
+    depth), so the swept traction falls as 1/r, t = d / (r ∫ dA / r); ``"uniform"``: t = d / A
+    (A the cone's area).
+(b) cutting torque — tangential traction on the cone about the axis, moment 1 N·mm about d,
+    no net force: "allotta", again a constant tangential force per unit lip length (Eq 2.19's
+    moment per unit depth grows as r), t = θ̂ / (r A); "uniform", growing with the distance from
+    the axis, t = k d × (x − c), k = 1 / ∫ |(x − c)⊥|² dA (c the cone's area centroid, on the
+    axis for a whole cone).
 (c) chip-evacuation torque — the chips rub the wall circumferentially (Eq 3.17, dT_c = R F_wf)
     with the chip pressure's growth along the engaged wall, dT_c/dζ ∝ exp(p ζ / D) (Eq 3.18's
     integrand; ζ the depth below the wall's top at that azimuth, p the growth exponent ηMD/S,
@@ -43,6 +49,7 @@ from femstudy.hole.dirichlet import facet_indices
 #: Polynomial degree integrated exactly on each facet.
 QUADRATURE_DEGREE = 6
 EVACUATION_THRUST_PLACES = ("bottom", "wall")
+CONE_TRACTIONS = ("allotta", "uniform")
 
 
 @dataclass(frozen=True)
@@ -162,7 +169,8 @@ def _safe_inverse(value: float) -> float:
     return 1.0 / value if value > 0 else 0.0
 
 
-def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_on: str = "bottom") -> HoleLoads:
+def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_on: str = "bottom",
+               cone_traction: str = "allotta") -> HoleLoads:
     """The unit drill loads on the hole of ``station`` for a system assembled on ``station.mesh``.
 
     Parameters
@@ -171,6 +179,7 @@ def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_
     station : :class:`femstudy.hole.mesh.HoleStation`
     growth_exponent : p of the chip pressure exp(p ζ / D) along the engaged wall (0: uniform)
     evacuation_thrust_on : "bottom" (default) or "wall", where the evacuation thrust acts
+    cone_traction : "allotta" (default) or "uniform", how the cutting loads spread over the cone
 
     Returns
     -------
@@ -184,6 +193,7 @@ def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_
     require(evacuation_thrust_on in EVACUATION_THRUST_PLACES,
             f"the evacuation thrust acts on 'bottom' or 'wall', not '{evacuation_thrust_on}'")
     require(np.isfinite(growth_exponent), f"the growth exponent must be finite, got {growth_exponent}")
+    require(cone_traction in CONE_TRACTIONS, f"the cone traction is 'allotta' or 'uniform', not '{cone_traction}'")
     hole = station.hole
     d, o = hole.frame.axis, hole.frame.origin
     diameter = 2 * hole.radius_mm
@@ -191,11 +201,20 @@ def hole_loads(system, station, growth_exponent: float = 0.0, evacuation_thrust_
     cone = facet_quadrature(system, station.faces["hole_bottom"])
     area = cone.area_mm2
     centre = np.einsum("fq,fqj->j", cone.w, cone.x) / area if area > 0 else o + station.tip_depth_mm * d
-    thrust = cone.forces(np.broadcast_to(d * _safe_inverse(area), cone.x.shape))
     arm = cone.x - centre
     arm -= (arm @ d)[..., None] * d
-    k = _safe_inverse(np.einsum("fq,fqj,fqj->", cone.w, arm, arm))
-    torque = cone.forces(k * np.cross(d, arm))
+    if cone_traction == "uniform":
+        thrust = cone.forces(np.broadcast_to(d * _safe_inverse(area), cone.x.shape))
+        k = _safe_inverse(np.einsum("fq,fqj,fqj->", cone.w, arm, arm))
+        torque = cone.forces(k * np.cross(d, arm))
+    else:  # constant force per unit lip length: tractions ∝ 1/r about the drill axis
+        radial = cone.x - o
+        radial -= (radial @ d)[..., None] * d
+        r = np.linalg.norm(radial, axis=-1)
+        inv_r = 1.0 / np.where(r > 0, r, np.inf)
+        thrust = cone.forces(_safe_inverse(np.einsum("fq,fq->", cone.w, inv_r)) * inv_r[..., None] * d)
+        tangent = np.cross(d, radial) * (inv_r ** 2)[..., None]  # θ̂ / r
+        torque = cone.forces(_safe_inverse(area) * tangent)
     mean = cone.mean_operator() if area > 0 else sp.csr_matrix((3, system.n_dofs))
 
     wall = facet_quadrature(system, station.faces["hole_wall"])

@@ -29,7 +29,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio
+from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio, strain_ratio
 from femstudy.fe.post import quadrature_points, stress_projection, von_mises
 from femstudy.femur_mesh import CORTICAL
 from femstudy.hole.samples import hole_distance, offset_samples
@@ -51,7 +51,10 @@ class HoleMeasure:
     location_distance_mm : that point's distance from the hole surface
     max_principal_stress_MPa, min_principal_stress_MPa : extreme principal stresses
     max_principal_strain, min_principal_strain : extreme principal strains [-]
-    strength_ratio : smallest load factor to failure (femstudy.failure) over the set
+    strength_ratio : smallest load factor to failure by the stress criteria (femstudy.failure:
+           Tsai–Wu for cortical, von Mises for cancellous bone) over the set
+    strain_ratio : smallest load factor to the cortical maximum principal strain criterion
+           (femstudy.failure.strain_ratio) over the set's cortical points (inf without any)
     points : how many points of the set lie in bone
     """
 
@@ -68,6 +71,7 @@ class HoleMeasure:
     max_principal_strain: float
     min_principal_strain: float
     strength_ratio: float
+    strain_ratio: float
     points: int
 
     def row(self) -> dict:
@@ -91,7 +95,7 @@ def _tensor(voigt: np.ndarray, shear_factor: float) -> np.ndarray:
 class _PointValues:
     """Measured points (n, 3) [mm], their distance from the hole [mm] (n,), and per point and
     loading (n, k): von Mises [MPa], extreme principal stresses [MPa] and strains, and the
-    strength ratio (femstudy.failure)."""
+    strength and strain ratios (femstudy.failure)."""
 
     points: np.ndarray
     distance: np.ndarray
@@ -101,7 +105,7 @@ class _PointValues:
     strain_max: np.ndarray
     strain_min: np.ndarray
     strength_ratio: np.ndarray
-
+    strain_ratio: np.ndarray
 
     def subset(self, chosen: np.ndarray) -> _PointValues:
         return _PointValues(*(getattr(self, f.name)[chosen] for f in fields(self)))
@@ -115,8 +119,9 @@ def _point_values(points, distance, stress, D, region, long_axis) -> _PointValue
     vm = von_mises(stress)  # (n, k)
     cortical = region == CORTICAL
     ratio = np.where(cortical[:, None], cortical_strength_ratio(stress, long_axis), cancellous_strength_ratio(vm))
+    strained = np.where(cortical[:, None], strain_ratio(principal_strain[..., -1], principal_strain[..., 0]), np.inf)
     return _PointValues(points, distance, vm, principal_stress[..., -1], principal_stress[..., 0],
-                        principal_strain[..., -1], principal_strain[..., 0], ratio)
+                        principal_strain[..., -1], principal_strain[..., 0], ratio, strained)
 
 
 def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure]:
@@ -126,7 +131,8 @@ def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure
         return [HoleMeasure(name, **context, von_mises_MPa=np.nan, location_mm=(np.nan,) * 3,
                             location_distance_mm=np.nan, max_principal_stress_MPa=np.nan,
                             min_principal_stress_MPa=np.nan, max_principal_strain=np.nan,
-                            min_principal_strain=np.nan, strength_ratio=np.nan, points=0) for name in loadings]
+                            min_principal_strain=np.nan, strength_ratio=np.nan, strain_ratio=np.nan, points=0)
+                for name in loadings]
     vm = values.von_mises
     out = []
     for j, name in enumerate(loadings):
@@ -137,12 +143,41 @@ def _measures(values: _PointValues, context: dict, loadings) -> list[HoleMeasure
                                min_principal_stress_MPa=float(values.stress_min[:, j].min()),
                                max_principal_strain=float(values.strain_max[:, j].max()),
                                min_principal_strain=float(values.strain_min[:, j].min()),
-                               strength_ratio=float(values.strength_ratio[:, j].min()), points=len(points)))
+                               strength_ratio=float(values.strength_ratio[:, j].min()),
+                               strain_ratio=float(values.strain_ratio[:, j].min()), points=len(points)))
     return out
 
 
-def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",)
-                      ) -> list[HoleMeasure]:
+@dataclass(frozen=True)
+class DistanceSamples:
+    """The points at one distance δ [mm] from the hole that lie in the bone of a station's local
+    mesh, located once (their elements depend only on the mesh): points (n, 3) [mm], element
+    (n,), and ``wall`` (n,) True beside the cylindrical wall."""
+
+    distance_mm: float
+    points: np.ndarray
+    element: np.ndarray
+    wall: np.ndarray
+
+
+def distance_samples(system, station, distances_mm) -> tuple[DistanceSamples, ...]:
+    """The sample points at each distance δ from the hole (module docstring), with the points
+    where the curve leaves the bone or crosses a material interface, located in ``system``'s
+    mesh; any solution on that mesh (other materials, other loads) is measured on them."""
+    from femstudy.hole.probe import MeshLocator
+
+    locator = MeshLocator(system)
+    out = []
+    for delta in distances_mm:
+        samples = offset_samples(station, delta).with_boundary_points(locator.label)
+        element = locator.locate(samples.points)[0]
+        inside = element >= 0
+        out.append(DistanceSamples(float(delta), samples.points[inside], element[inside], samples.of("wall")[inside]))
+    return tuple(out)
+
+
+def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",),
+                      samples: tuple[DistanceSamples, ...] | None = None) -> list[HoleMeasure]:
     """Measures over the points at each distance δ from the hole (module docstring).
 
     Parameters
@@ -153,6 +188,7 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     distances_mm : distances δ from the hole surface [mm]
     long_axis : (3,) the bone's long axis (cortical strength frame)
     loadings : k names of the columns of ``u``
+    samples : the points of :func:`distance_samples` on this mesh, when already located
 
     Returns
     -------
@@ -162,18 +198,19 @@ def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, l
     --------
     >>> distance_measures(system, station, u, (0.5, 1.0), model.frame.up)  # doctest: +SKIP
     """
-    from femstudy.hole.probe import MeshLocator, point_probe
+    from femstudy.hole.probe import point_probe
 
     u = np.asarray(u, float).reshape(system.n_dofs, -1)
-    locator = MeshLocator(system)
+    located = {s.distance_mm: s for s in (distance_samples(system, station, distances_mm) if samples is None
+                                          else samples)}
     out = []
     for delta in distances_mm:
-        samples = offset_samples(station, delta).with_boundary_points(locator.label)
-        probe = point_probe(system, samples.points, locator=locator)
-        e = probe.element[probe.inside]
-        values = _point_values(probe.points[probe.inside], np.full(len(e), float(delta)), probe.stress(u)[probe.inside],
+        found = located[float(delta)]
+        e = found.element
+        probe = point_probe(system, found.points, e)
+        values = _point_values(found.points, np.full(len(e), float(delta)), probe.stress(u),
                                system.materials.D[system.materials.index[e]], system.region[e], long_axis)
-        for kind, chosen in (("distance", np.ones(len(e), bool)), ("wall", samples.of("wall")[probe.inside])):
+        for kind, chosen in (("distance", np.ones(len(e), bool)), ("wall", found.wall)):
             context = {"station": station.index, "tip_depth_mm": station.tip_depth_mm, "kind": kind,
                        "radius_mm": float(delta)}
             out += _measures(values.subset(chosen), context, loadings)

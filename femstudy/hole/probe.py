@@ -177,7 +177,7 @@ def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,
         xi, invJ, _ = _reference_coordinates(system, element, points)
     inside = element >= 0
     if (~inside).any():
-        log.info("%d of %d probe points lie outside the mesh", np.sum(~inside), len(points))
+        log.debug("%d of %d probe points lie outside the mesh", np.sum(~inside), len(points))
     e, xi, invJ = element[inside], xi[inside], invJ[inside]
     ref = system.ref
     nbf = ref.nbf

@@ -33,10 +33,10 @@ from femstudy.errors import UserError, require
 from femstudy.materials import BoneMaterials
 from femstudy.hole.coupling import cut_boundary
 from femstudy.hole.dirichlet import factorize_prescribed
-from femstudy.hole.femur import femur_columns, smooth_columns
+from femstudy.hole.femur import femur_columns, smooth_columns, surface_columns
 from femstudy.hole.frame import HoleFrame
 from femstudy.hole.loads import hole_loads
-from femstudy.hole.measures import HoleMeasure, distance_measures, exclusion_measures
+from femstudy.hole.measures import HoleMeasure, distance_measures, distance_samples, exclusion_measures
 from femstudy.hole.mesh import Resolution, hole_mesh
 from femstudy.hole.probe import MeshLocator
 
@@ -68,6 +68,8 @@ class HoleOptions:
         global facets
     rotation_deg : turns the local mesh about the drill axis (its placement; for measuring the
         discretisation noise of a maximum, as two meshes of one size placed differently)
+    cone_traction : how the cutting loads spread over the drill-point cone, "allotta" or
+        "uniform" (:func:`femstudy.hole.loads.hole_loads`)
     """
 
     stations: int = 3
@@ -82,6 +84,7 @@ class HoleOptions:
     cut_margin_mm: float = 2.0
     smoothing_mm: float = 1.0
     rotation_deg: float = 0.0
+    cone_traction: str = "allotta"
 
 
 @dataclass(frozen=True)
@@ -123,6 +126,23 @@ class HoleInputs:
 
 
 @dataclass(frozen=True)
+class HoleScenario:
+    """An alternative measured on the same local meshes as the study's hole models, for its
+    dynamic loading: the global unit fields of another global model (``unit_fields``, (n_dofs,
+    2); None: the study's), other materials of the local models (None: the inputs'), another
+    spread of the cutting loads over the cone (``cone_traction``; None: the options'), another
+    clamped length left out of the exclusion measures (``clamp_length_mm``; None: the inputs'). The
+    meshes, the cut nodes' places in the femur mesh and the measures' points are shared; a
+    scenario of other materials costs one more factorisation, any other one more right-hand side."""
+
+    name: str
+    unit_fields: np.ndarray | None = None
+    materials: BoneMaterials | None = None
+    cone_traction: str | None = None
+    clamp_length_mm: float | None = None
+
+
+@dataclass(frozen=True)
 class StationRun:
     """One station: its loads, its size and cost.
 
@@ -159,6 +179,9 @@ class HoleResult:
     mesh_seconds : time to build the column mesh [s]
     axis_bottom_mm : depth of the local model's bottom surface on the drill axis below the entry
         point [mm] (inf: solid bone to the depth cap); minus the deepest tip, the ligament
+    bone_axis, bone_axis_evidence : the cortex's material and strength axis at the site and how
+        it was found (:class:`HoleSite`)
+    scenarios : name → the dynamic loading's measures of each :class:`HoleScenario` asked for
     """
 
     options: HoleOptions
@@ -167,6 +190,9 @@ class HoleResult:
     static_load: tuple
     mesh_seconds: float
     axis_bottom_mm: float
+    bone_axis: tuple = (0.0, 0.0, 1.0)
+    bone_axis_evidence: dict | None = None
+    scenarios: dict | None = None
 
     @property
     def wall_element_mm(self) -> float:
@@ -196,21 +222,32 @@ class HoleResult:
         return rows
 
     def margins(self) -> dict:
-        """Failure margins (:mod:`femstudy.failure`: Tsai–Wu strength ratio for cortical bone,
-        von Mises against the mean strength for cancellous bone; docs/failure.md): per loading, the
-        smallest strength ratio over the stations at every distance from the hole and outside the
-        quoted exclusion radius, with the station and point where it occurs."""
-        out = {"basis": "hole", "criterion": "Tsai-Wu (cortical), von Mises / mean strength (cancellous)",
-               "source": "femstudy/failure.py, docs/failure.md"}
-        sets = [("distance", r) for r in self.options.distances_mm] + [("exclusion", self.options.exclusion_radius_mm)]
+        """Failure margins (:mod:`femstudy.failure`; docs/failure.md): per loading and for every
+        near-hole measure (at each distance from the hole, beside its wall, beyond each exclusion
+        radius), the smallest load factor to failure over the stations by the stress criteria
+        (Tsai–Wu for cortical bone, von Mises against the mean strength for cancellous bone) and
+        by the cortical strain criterion, the smaller of the two as the measure's margin, and the
+        station where it occurs."""
+        from femstudy.failure import CorticalStrainLimits
+
+        out = {"basis": "hole", "criterion": "Tsai-Wu (cortical), von Mises / mean strength (cancellous); "
+                                             "maximum principal strain (cortical)",
+               "strain_limits": CorticalStrainLimits().source, "source": "femstudy/failure.py, docs/failure.md"}
+        sets = ([("distance", r) for r in self.options.distances_mm] + [("wall", r) for r in self.options.distances_mm]
+                + [("exclusion", r) for r in self.options.exclusion_radii_mm])
         for loading in LOADINGS:
             rows = []
             for kind, radius in sets:
                 found = [m for m in self.measures if m.kind == kind and m.loading == loading
-                         and abs(m.radius_mm - radius) < 1e-9 and np.isfinite(m.strength_ratio)]
-                if found:
-                    worst = min(found, key=lambda m: m.strength_ratio)
-                    rows.append({"kind": kind, "radius_mm": float(radius), "strength_ratio": worst.strength_ratio,
+                         and abs(m.radius_mm - radius) < 1e-9]
+                margin = [min(m.strength_ratio, m.strain_ratio) for m in found]
+                if found and np.isfinite(margin).any():
+                    worst = found[int(np.nanargmin(np.where(np.isfinite(margin), margin, np.nan)))]
+                    rows.append({"kind": kind, "radius_mm": float(radius), "margin": min(worst.strength_ratio,
+                                                                                         worst.strain_ratio),
+                                 "strength_ratio": min(m.strength_ratio for m in found),
+                                 "strain_ratio": min(m.strain_ratio for m in found),
+                                 "governed_by": "strain" if worst.strain_ratio < worst.strength_ratio else "stress",
                                  "station": worst.station, "tip_depth_mm": worst.tip_depth_mm})
             out[loading] = rows
         return out
@@ -227,6 +264,7 @@ class HoleResult:
                          "static_load": {"thrust_N": self.static_load[0], "torque_Nmm": self.static_load[1]},
                          "mesh_s": self.mesh_seconds, "wall_element_mm": self.wall_element_mm,
                          "axis_bottom_mm": self.axis_bottom_mm if np.isfinite(self.axis_bottom_mm) else None,
+                         "bone_axis": list(self.bone_axis), "bone_axis_evidence": self.bone_axis_evidence,
                          "distance": self.table("distance"), "wall": self.table("wall"),
                          "exclusion": self.table("exclusion"),
                          "margins": self.margins(),
@@ -245,8 +283,115 @@ def station_tips(options: HoleOptions, drilled_depth_mm: float, cortex_mm: float
     return deepest * np.arange(1, options.stations + 1) / options.stations
 
 
+@dataclass(frozen=True)
+class HoleSite:
+    """The hole's geometry around the drill site, shared by every refinement of the local models.
+
+    frame : the local frame (entry point, drill axis, e1, e2)
+    columns : the column tops, bottoms, regions and cortex interface (:mod:`femstudy.hole.femur`)
+    options : the options with the local model's radius fitted to the bone
+    tips : the stations' drill-tip depths [mm]
+    axis_bottom_mm : the local model's bottom on the drill axis below the entry point [mm] (inf:
+        solid bone to the depth cap)
+    seconds : time to build it [s]
+    bone_axis : the bone's local long axis at the site: the transversely isotropic cortex's
+        axis and the strength criteria's (:func:`femstudy.meshing.site_surface.local_axis`)
+    bone_axis_evidence : how it was found
+    """
+
+    frame: HoleFrame
+    columns: object
+    options: HoleOptions
+    tips: np.ndarray
+    axis_bottom_mm: float
+    seconds: float
+    bone_axis: np.ndarray
+    bone_axis_evidence: dict
+
+    def with_ligament(self, ligament_mm: float, drilled_depth_mm: float) -> "HoleSite":
+        """The same geometry with the stations of another ligament rule (:func:`station_tips`)."""
+        options = replace(self.options, ligament_mm=ligament_mm)
+        return replace(self, options=options, tips=station_tips(options, drilled_depth_mm, self.axis_bottom_mm))
+
+    def turned(self, degrees: float) -> "HoleSite":
+        """The same geometry with the local mesh turned by ``degrees`` about the drill axis (a
+        replicate placement of the mesh, for measuring the discretisation noise of a maximum)."""
+        c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+        frame = HoleFrame(self.frame.origin, self.frame.axis, c * self.frame.e1 + s * self.frame.e2,
+                          c * self.frame.e2 - s * self.frame.e1)
+        return replace(self, frame=frame, columns=TurnedColumns(self.columns, frame, c, s),
+                       options=replace(self.options, rotation_deg=self.options.rotation_deg + degrees))
+
+
+@dataclass(frozen=True)
+class TurnedColumns:
+    """Columns seen in a frame turned about the drill axis: local (x, y) in the turned frame are
+    (c x − s y, s x + c y) in the original one."""
+
+    columns: object
+    frame: HoleFrame
+    c: float
+    s: float
+
+    def _xy(self, xy: np.ndarray) -> np.ndarray:
+        xy = np.atleast_2d(np.asarray(xy, float))
+        return np.column_stack([self.c * xy[:, 0] - self.s * xy[:, 1], self.s * xy[:, 0] + self.c * xy[:, 1]])
+
+    def top(self, xy: np.ndarray) -> np.ndarray:
+        return self.columns.top(self._xy(xy))
+
+    def bottom(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return self.columns.bottom(self._xy(xy))
+
+    def region(self, points: np.ndarray) -> np.ndarray:
+        return self.columns.region(points)
+
+    @property
+    def interface(self):
+        inner = self.columns.interface
+        return None if inner is None else (lambda xy: inner(self._xy(xy)))
+
+
+def hole_site(inputs: HoleInputs, femur, options: HoleOptions = HoleOptions()) -> HoleSite:
+    """The hole's geometry at the femur's drill site: the columns from the bone's surfaces when
+    the femur carries them (:func:`femstudy.hole.femur.surface_columns`), else from its mesh;
+    the local model's radius fitted to the bone; the stations' tips (:func:`station_tips`)."""
+    from femstudy.meshing.landmarks import outer_faces
+
+    require(options.stations >= 1, f"the hole needs at least one station, got {options.stations}")
+    start = time.perf_counter()
+    frame = HoleFrame.along(femur.site.entry_point, femur.site.direction)
+    outer = outer_faces(femur.mesh, femur.frame)
+    surface = getattr(femur, "surface", None)
+    if surface is not None:
+        reach = options.submodel_radius_mm + 4 * options.smoothing_mm + 1.0
+        columns = surface_columns(surface, femur.mesh, outer, frame, options.depth_cap_mm, reach)
+    else:
+        columns = femur_columns(femur.mesh, outer, frame, options.depth_cap_mm)
+    radius = fitting_radius(columns, options.submodel_radius_mm, inputs.drill.radius_mm + options.cut_margin_mm + 1.0)
+    if radius < options.submodel_radius_mm:
+        log.warning("hole model: radius %.1f mm instead of %.1f mm, the largest that stays on the bone around the "
+                    "hole; measures farther from the hole than it allows are missing", radius, options.submodel_radius_mm)
+        options = replace(options, submodel_radius_mm=radius)
+    if options.smoothing_mm > 0:
+        columns = smooth_columns(columns, options.submodel_radius_mm, options.smoothing_mm)
+    axis_bottom, axis_free = columns.bottom(np.zeros((1, 2)))
+    axis_bottom = float(axis_bottom[0]) if axis_free[0] else np.inf
+    tips = station_tips(options, inputs.drilled_depth_mm, axis_bottom)
+    if surface is not None:
+        from femstudy.meshing.site_surface import local_axis
+
+        axis, evidence = local_axis(surface, femur.frame.up)
+    else:
+        axis, evidence = np.asarray(femur.frame.up, float), {"axis": "femur long axis", "why": "no surface"}
+    site = HoleSite(frame, columns, options, tips, axis_bottom, time.perf_counter() - start, axis, evidence)
+    return site.turned(options.rotation_deg) if options.rotation_deg else site
+
+
 def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, options: HoleOptions = HoleOptions(),
-                  solver: str = "auto", keep: Path | None = None) -> HoleResult:
+                  solver: str = "auto", keep: Path | None = None, site: HoleSite | None = None,
+                  stations: tuple | None = None, scenarios: tuple = (),
+                  locator: MeshLocator | None = None) -> HoleResult:
     """Stresses near the drilled hole at a few depth stations, driven by the global model.
 
     Parameters
@@ -254,16 +399,25 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
     inputs : HoleInputs
         Drill, materials, element order, clamped length, depth and the loads at each tip depth.
     femur : :class:`femstudy.meshing.FemurModel`
-        The global femur (no hole): its mesh, frame and drill site.
+        The global femur (no hole): its mesh, frame, drill site and surfaces.
     system : :class:`femstudy.fe.FESystem`
         Assembled on ``femur.mesh``.
     unit_fields : (n_dofs, 2) ndarray
         Global displacements [mm] under a unit patch thrust [1 N] and torque [1 N·mm].
     options : HoleOptions
+        Its refinement sets the local models' mesh; with ``site`` given its geometry options
+        are the site's.
     solver : str
         Linear solver of the local models.
     keep : Path, optional
         Folder of kept solutions for the local models (:func:`femstudy.fe.factorize`).
+    site : HoleSite, optional
+        The geometry (:func:`hole_site`) when already built, e.g. for another refinement.
+    stations : tuple of int, optional
+        Only these stations (negative numbers count from the deepest); default all.
+    scenarios : tuple of HoleScenario
+        Alternatives measured on the same meshes (:class:`HoleScenario`; ``HoleResult.scenarios``).
+    locator : :class:`~femstudy.hole.probe.MeshLocator` of ``system``, to reuse one built before
 
     Returns
     -------
@@ -276,68 +430,98 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
     >>> result.headline().von_mises_MPa                                       # doctest: +SKIP
     """
     from femstudy.fe import assemble
-    from femstudy.meshing.landmarks import outer_faces
 
-    require(options.stations >= 1, f"the hole needs at least one station, got {options.stations}")
     start = time.perf_counter()
-    frame = HoleFrame.along(femur.site.entry_point, femur.site.direction)
-    if options.rotation_deg:
-        c, s = np.cos(np.radians(options.rotation_deg)), np.sin(np.radians(options.rotation_deg))
-        frame = HoleFrame(frame.origin, frame.axis, c * frame.e1 + s * frame.e2, c * frame.e2 - s * frame.e1)
-    columns = femur_columns(femur.mesh, outer_faces(femur.mesh, femur.frame), frame, options.depth_cap_mm)
-    radius = fitting_radius(columns, options.submodel_radius_mm, inputs.drill.radius_mm + options.cut_margin_mm + 1.0)
-    if radius < options.submodel_radius_mm:
-        log.warning("hole model: radius %.1f mm instead of %.1f mm, the largest that stays on the bone around the "
-                    "hole; measures farther from the hole than it allows are missing", radius, options.submodel_radius_mm)
-        options = replace(options, submodel_radius_mm=radius)
-    if options.smoothing_mm > 0:
-        columns = smooth_columns(columns, options.submodel_radius_mm, options.smoothing_mm)
-    axis_bottom, axis_free = columns.bottom(np.zeros((1, 2)))
-    axis_bottom = float(axis_bottom[0]) if axis_free[0] else np.inf
-    tips = station_tips(options, inputs.drilled_depth_mm, axis_bottom)
+    site = hole_site(inputs, femur, options) if site is None else site
+    options = replace(site.options, refinement=options.refinement)
+    frame, columns, tips = site.frame, site.columns, site.tips
     hole = hole_mesh(frame, inputs.drill.diameter_mm, inputs.drill.point_angle_deg, options.submodel_radius_mm, tips,
                      columns.top, columns.bottom, columns.region, Resolution(refinement=options.refinement),
                      columns.interface)
     mesh_seconds = time.perf_counter() - start
-    log.info("hole model: %d stations (tips %s mm), column mesh %.1f s", len(tips),
-             ", ".join(f"{t:.2f}" for t in tips), mesh_seconds)
-    up = np.asarray(femur.frame.up, float)
+    log.info("hole model: %d stations (tips %s mm), refinement %.3g, column mesh %.1f s", len(tips),
+             ", ".join(f"{t:.2f}" for t in tips), options.refinement, mesh_seconds)
+    up, axis = np.asarray(femur.frame.up, float), np.asarray(site.bone_axis, float)
     heights = femur.mesh.points @ up
     static = tuple(float(x) for x in inputs.static_load)
     runs, measures = [], []
-    global_locator = MeshLocator(system)  # every station's cut nodes are found in the one femur mesh
+    global_locator = locator or MeshLocator(system)  # every station's cut nodes are found in the one femur mesh
+    chosen = set(range(len(tips))) if stations is None else {k % len(tips) for k in stations}
+    scenarios = tuple(scenarios)
+    fields = np.hstack([unit_fields] + [s.unit_fields for s in scenarios if s.unit_fields is not None])
+    field_of = 1 + np.cumsum([0] + [s.unit_fields is not None for s in scenarios])  # field set of each scenario's own
+    tractions = list(dict.fromkeys([options.cone_traction] + [s.cone_traction for s in scenarios if s.cone_traction]))
+    of_scenarios = {s.name: [] for s in scenarios}
     for k, tip in enumerate(tips):
+        if k not in chosen:
+            continue
         start = time.perf_counter()
         station = hole.at_station(k)
-        local = assemble(station.mesh, inputs.materials, order=inputs.order, long_axis=up)
+        local = assemble(station.mesh, inputs.materials, order=inputs.order, long_axis=axis)
         load = inputs.station_load(float(tip))
         t, F_cut, T_cut, F_evac, T_evac = (load.time_s, load.cutting_thrust_N, load.cutting_torque_Nmm,
                                            load.evacuation_thrust_N, load.evacuation_torque_Nmm)
-        cut = cut_boundary(system, unit_fields, local, station, locator=global_locator)
-        patterns = hole_loads(local, station, growth_exponent=inputs.growth_exponent)
-        unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
-        loadings = np.array([[F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac],  # HoleLoads.force order
-                             [*static, *static, 0.0, 0.0]]).T  # (patch thrust, torque, 4 hole loads) × 2 loadings
-        u = unit @ loadings
-        measures += distance_measures(local, station, u, options.distances_mm, up, LOADINGS)
+        cut = cut_boundary(system, fields, local, station, locator=global_locator)
+        patterns = np.hstack([hole_loads(local, station, growth_exponent=inputs.growth_exponent,
+                                         cone_traction=traction).patterns for traction in tractions])
+        samples = distance_samples(local, station, options.distances_mm)
         excluded = _excluded(local, cut.dofs, heights, up, inputs.clamp_length_mm, options.cut_margin_mm)
-        measures += exclusion_measures(local, station, u, options.exclusion_radii_mm, up, excluded, LOADINGS)
+        # (patch thrust, torque) on the cut faces and the 4 hole loads (HoleLoads.force order), per loading
+        dynamic = np.array([F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac])
+        static_loading = np.array([*static, *static, 0.0, 0.0])
+
+        def responses(field: int, traction: str, loading: np.ndarray) -> np.ndarray:
+            """Coefficients of the unit responses' columns for one field set, traction and loading."""
+            c = np.zeros(fields.shape[1] + 4 * len(tractions))
+            c[2 * field:2 * field + 2] = loading[:2]
+            at = fields.shape[1] + 4 * tractions.index(traction)
+            c[at:at + 4] = loading[2:]
+            return c
+
+        unit, factorisations = _unit_responses(local, cut, patterns, solver, keep)
+        u = unit @ np.column_stack([responses(0, options.cone_traction, dynamic),
+                                    responses(0, options.cone_traction, static_loading)])
+        measures += _station_measures(local, station, u, options, axis, excluded, samples, LOADINGS)
+        for materials in dict.fromkeys(s.materials for s in scenarios):  # one factorisation per materials
+            group = [(i, s) for i, s in enumerate(scenarios) if s.materials is materials]
+            if materials is not None:
+                local = assemble(station.mesh, materials, order=inputs.order, long_axis=axis)
+                unit, more = _unit_responses(local, cut, patterns, solver, keep)
+                factorisations += more
+            u = unit @ np.column_stack([responses(int(field_of[i]) if s.unit_fields is not None else 0,
+                                                  s.cone_traction or options.cone_traction, dynamic)
+                                        for i, s in group])
+            for j, (_, s) in enumerate(group):
+                held = excluded if s.clamp_length_mm is None else \
+                    _excluded(local, cut.dofs, heights, up, s.clamp_length_mm, options.cut_margin_mm)
+                of_scenarios[s.name] += _station_measures(local, station, u[:, j:j + 1], options, axis, held,
+                                                          samples, ("dynamic",))
         seconds = time.perf_counter() - start
         runs.append(StationRun(k, float(tip), t, F_cut, T_cut, F_evac, T_evac, local.n_dofs, len(cut.dofs), seconds,
                                cut.moved_mm, factorisations))
-        log.info("hole station %d (tip %.2f mm): %d DOFs, %.1f s", k, tip, local.n_dofs, seconds)
-    return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds, axis_bottom)
+        log.info("hole station %d (tip %.2f mm): %d DOFs%s, %.1f s", k, tip, local.n_dofs,
+                 f", {len(scenarios)} alternatives" if scenarios else "", seconds)
+    return HoleResult(options, tuple(runs), tuple(measures), static, mesh_seconds, site.axis_bottom_mm,
+                      tuple(float(x) for x in axis), site.bone_axis_evidence,
+                      {name: tuple(found) for name, found in of_scenarios.items()} if scenarios else None)
+
+
+def _station_measures(local, station, u, options, axis, excluded, samples, loadings) -> list:
+    """Every measure of one station's solution ``u`` (n_dofs, one column per loading)."""
+    return (distance_measures(local, station, u, options.distances_mm, axis, loadings, samples)
+            + exclusion_measures(local, station, u, options.exclusion_radii_mm, axis, excluded, loadings))
 
 
 def _unit_responses(local, cut, patterns, solver, keep) -> tuple[np.ndarray, int]:
     """The local model's unit responses [mm] and the factorisations they took: the cut faces
-    under the global field of a unit patch thrust and torque, and each unit hole load with the
-    cut faces held. Any loading combines them, so kept solutions serve a study that changes only
-    the loads; the factorisation is released on return, before the measures are taken."""
-    n_cut, n_hole = cut.values.shape[1], patterns.patterns.shape[1]
+    under each global field (``cut.values``' columns), and each unit hole load (``patterns``'
+    columns) with the cut faces held. Any loading combines them, so kept solutions serve a study
+    that changes only the loads; the factorisation is released on return, before the measures
+    are taken."""
+    n_cut, n_hole = cut.values.shape[1], patterns.shape[1]
     prescribed = factorize_prescribed(local, cut.dofs, solver, keep)
     unit = prescribed.solve(np.hstack([cut.values, np.zeros((len(cut.dofs), n_hole))]),
-                            np.hstack([np.zeros((local.n_dofs, n_cut)), patterns.patterns]))
+                            np.hstack([np.zeros((local.n_dofs, n_cut)), patterns]))
     prescribed.fs.factor.close()
     return unit, prescribed.fs.factor.factorisations
 

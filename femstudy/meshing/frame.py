@@ -21,6 +21,7 @@ A step that cannot decide raises :class:`~femstudy.errors.UserError` with what i
 
 from __future__ import annotations
 
+import logging
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -28,6 +29,8 @@ import numpy as np
 from femstudy.errors import UserError, require
 from femstudy.meshing import bone_ends
 from femstudy.meshing.surface import surface_samples
+
+log = logging.getLogger(__name__)
 
 UNIT_SCALE = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 #: Plausible femur lengths in each unit (an adult femur is 250-700 mm).
@@ -90,8 +93,20 @@ class Frame:
         return cls(**d)
 
 
+def units_evidence(extent: float, unit: str, requested: str) -> dict:
+    """Why ``unit`` was taken for a femur ``extent`` long in the file's own units: its length under
+    every unit femstudy knows, and which of them put it in the range of adult femurs."""
+    lengths = {u: round(extent * UNIT_SCALE[u], 1) for u in UNIT_SCALE}
+    fits = [u for u, (lo, hi) in UNIT_RANGES.items() if lo <= extent <= hi]
+    why = (f"set in the case file (geometry.units = \"{requested}\")" if requested != "auto" else
+           f"the surface is {extent:.4g} long in its own units; only {unit} makes it a femur "
+           f"({UNIT_RANGES['mm'][0]:g}-{UNIT_RANGES['mm'][1]:g} mm)")
+    return {"raw_length": float(extent), "length_mm_if": lengths, "units_that_fit": fits, "why": why}
+
+
 def detect_units(extent: float, requested: str) -> tuple[str, float, list[str]]:
-    """Unit name and scale to mm for a femur whose raw length is ``extent``."""
+    """Unit name and scale to mm for a femur whose raw length is ``extent``; a unit other than mm
+    found automatically is announced in one warning that shows the length under every unit."""
     if requested != "auto":
         length_mm = extent * UNIT_SCALE[requested]
         lo, hi = UNIT_RANGES["mm"]
@@ -103,9 +118,15 @@ def detect_units(extent: float, requested: str) -> tuple[str, float, list[str]]:
         return requested, UNIT_SCALE[requested], ["units"]
     for unit, (lo, hi) in UNIT_RANGES.items():
         if lo <= extent <= hi:
+            if unit != "mm":
+                lengths = ", ".join(f"{extent * UNIT_SCALE[u]:.4g} mm as {u}" for u in UNIT_SCALE)
+                log.warning("the surface is %.4g long in its own units, read as %s (%s); set geometry.units if it "
+                            "is not in %s", extent, unit, lengths, unit)
             return unit, UNIT_SCALE[unit], []
-    raise UserError(f"cannot tell the units of a femur {extent:.4g} long (expected about 0.45 m, 45 cm, "
-                    "18 in or 450 mm); set geometry.units in the case file")
+    lengths = ", ".join(f"{extent * UNIT_SCALE[u]:.4g} mm as {u}" for u in UNIT_SCALE)
+    raise UserError(f"cannot tell the units of the surface: it is {extent:.4g} long in its own units ({lengths}), "
+                    f"and no unit makes it an adult femur ({UNIT_RANGES['mm'][0]:g}-{UNIT_RANGES['mm'][1]:g} mm); "
+                    "set geometry.units in the case file")
 
 
 def _unit(v) -> np.ndarray:
@@ -158,6 +179,7 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
     proj = points @ axis
     units, scale, o = detect_units(float(proj.max() - proj.min()), geometry.units)
     overridden += o
+    units_found = units_evidence(float(proj.max() - proj.min()), units, geometry.units)
     pts = points * scale
     centres = centres * scale
     areas = areas * scale ** 2
@@ -182,7 +204,7 @@ def build_frame(points: np.ndarray, triangles: np.ndarray, geometry) -> tuple[Fr
         return d - (d @ axis) * axis
 
     ends = {e: bone_ends.describe_end(centres, normals, areas, axis, e, length) for e in "+-"}
-    evidence: dict = {"ends": {e: shape.summary() for e, shape in ends.items()}}
+    evidence: dict = {"units": units_found, "ends": {e: shape.summary() for e, shape in ends.items()}}
     if geometry.proximal_end != "auto":
         sign = 1.0 if geometry.proximal_end == "+" else -1.0
         overridden.append("proximal_end")

@@ -14,6 +14,10 @@ from femstudy.errors import UserError
 from femstudy.femur_mesh import REGION_NAMES, Clamps, DrillSite, TetMesh
 from femstudy.meshing import cache, landmarks
 from femstudy.meshing.frame import Frame
+from femstudy.meshing.site_surface import PATCH_RADIUS_MM, SiteSurface, drill_site_on, site_surface
+
+#: Bumped when what the site stage stores changes (the TetWild stage's entries stay valid).
+SITE_LAYOUT = 2
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +56,7 @@ class FemurModel:
     quality: dict
     stats: dict
     canal_axis: np.ndarray = field(repr=False, default=None)
+    surface: SiteSurface | None = field(repr=False, default=None)
 
 
 def surface_edge_mm(size_mm: float) -> float:
@@ -89,9 +94,10 @@ def mesh_parameters(spec: FemurSpec, size_mm: float, with_site: bool = True) -> 
     m = spec.mesh
     params = {"geometry": g, "size_mm": size_mm, "envelope": m.envelope}
     if with_site and m.refine == "site":
-        params.update(refine="site", site_size_mm=m.site_size_mm, site_radius_mm=m.site_radius_mm,
-                      site_position=spec.site.position, site_direction=spec.site.direction,
-                      drill_radius_mm=spec.drill_radius_mm)
+        params.update(refine="site", site_size_mm=m.site_size_mm, site_radius_mm=m.site_radius_mm)
+    if with_site:  # the site stage also keeps the surface patch around the site
+        params.update(site_position=spec.site.position, site_direction=spec.site.direction,
+                      drill_radius_mm=spec.drill_radius_mm, site_layout=SITE_LAYOUT)
     return params
 
 
@@ -138,7 +144,7 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
                         base = cache.store(base_key, *base, root=cache_dir)
                 else:
                     log.info("loaded the cached TetWild mesh %s; refining it at the drill site", base_key[:12])
-            arrays, meta = cache.store(key, *_finish(spec, size, *base), root=cache_dir)
+            arrays, meta = cache.store(key, *_finish(spec, path, size, *base), root=cache_dir)
         else:
             log.info("loaded cached mesh %s (%s)", key[:12], cache_dir)
             arrays, meta = hit
@@ -146,12 +152,17 @@ def build_femur_model(spec: FemurSpec, cache_dir: Path = cache.DEFAULT_CACHE_DIR
     frame = Frame.from_dict(meta["frame"])
     outer = landmarks.outer_faces(mesh, frame)
     clamps = landmarks.clamps(mesh, frame, outer, spec.clamp_length_mm)
-    centre = landmarks.section_centre(mesh.points, outer, frame, spec.site.position)
-    site = landmarks.drill_site(mesh, frame, outer, spec.site, centre, spec.drill_radius_mm)
+    surface = SiteSurface(arrays["site_points"], arrays["site_triangles"].astype(np.int64),
+                          np.asarray(meta["site"]["entry_mm"], float), PATCH_RADIUS_MM, frame,
+                          (spec.geometry.cortex.midshaft_mm, spec.geometry.cortex.epiphysis_mm),
+                          (spec.geometry.canal.proximal_fraction, spec.geometry.canal.distal_fraction))
+    site = drill_site_on(surface, spec.site, landmarks.drill_side(frame, spec.site),
+                         np.asarray(meta["site"]["centre_mm"], float), spec.drill_radius_mm, mesh)
     stats = dict(meta["stats"])
     stats.update(_landmark_stats(mesh, outer, site, clamps, spec.drill_radius_mm))
-    stats.update(cache_hit=hit is not None, cache_key=key, load_or_build_seconds=time.perf_counter() - start)
-    return FemurModel(mesh, clamps, site, frame, meta["quality"], stats, arrays["canal_axis"])
+    stats.update(cache_hit=hit is not None, cache_key=key, load_or_build_seconds=time.perf_counter() - start,
+                 surface_sha256=digest)
+    return FemurModel(mesh, clamps, site, frame, meta["quality"], stats, arrays["canal_axis"], surface)
 
 
 def _landmark_stats(mesh, outer, site, clamps, drill_radius_mm: float) -> dict:
@@ -213,8 +224,9 @@ def _build(spec: FemurSpec, path: Path, size: float) -> tuple[dict, dict]:
     return arrays, {"frame": frame.as_dict(), "stats": stats}
 
 
-def _finish(spec: FemurSpec, size: float, arrays: dict, meta: dict) -> tuple[dict, dict]:
-    """The TetWild stage's mesh refined at the drill site (if asked), its quality and statistics."""
+def _finish(spec: FemurSpec, path: Path, size: float, arrays: dict, meta: dict) -> tuple[dict, dict]:
+    """The TetWild stage's mesh refined at the drill site (if asked), its quality and statistics,
+    and the surface patch around the site (:mod:`femstudy.meshing.site_surface`)."""
     from femstudy.meshing import tetra
     from femstudy.meshing.tetra import signed_volumes
 
@@ -232,9 +244,24 @@ def _finish(spec: FemurSpec, size: float, arrays: dict, meta: dict) -> tuple[dic
                         "mesh.size_mm or check geometry.cortex and geometry.canal")
     stats = {"n_points": mesh.n_points, "n_tets": mesh.n_tets, "regions": per_region,
              "tet_volume_mm3": float(vol.sum()), **meta["stats"]}
+    patch, centre = _site_patch(spec, path, frame)
     arrays = {"points": mesh.points, "tets": mesh.tets.astype(np.int32), "region": mesh.region,
-              "canal_axis": arrays["canal_axis"]}
-    return arrays, {"frame": meta["frame"], "quality": tetra.quality(mesh), "stats": stats}
+              "canal_axis": arrays["canal_axis"], "site_points": patch.points,
+              "site_triangles": patch.triangles.astype(np.int32)}
+    site = {"centre_mm": [float(x) for x in centre], "entry_mm": [float(x) for x in patch.centre]}
+    return arrays, {"frame": meta["frame"], "quality": tetra.quality(mesh), "stats": stats, "site": site}
+
+
+def _site_patch(spec: FemurSpec, path: Path, frame: Frame) -> tuple[SiteSurface, np.ndarray]:
+    """The input surface (in mm, not decimated) within :data:`PATCH_RADIUS_MM` of the drill's
+    entry point on it, and the centre of the cross-section the drill aims at."""
+    from femstudy.meshing import surface
+
+    raw = surface.read_surface(path, spec.geometry.bodies)
+    points = raw.points * frame.scale_to_mm
+    centre = landmarks.section_centre(points, raw.triangles, frame, spec.site.position)
+    entry, _ = landmarks.entry_point(points[raw.triangles], frame, spec.site, centre)
+    return site_surface(points, raw.triangles, entry, PATCH_RADIUS_MM, frame, spec.geometry), centre
 
 
 def _refine_site(mesh: TetMesh, frame: Frame, spec: FemurSpec, size: float) -> TetMesh:

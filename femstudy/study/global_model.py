@@ -45,6 +45,21 @@ class GlobalModel:
     mesh_s: float
     assembly_s: float
 
+    def clamped(self, case: Case) -> "GlobalModel":
+        """This model under ``case``'s clamps (a copy of this case with another clamp length): the
+        same mesh and stiffness, other clamped nodes and output masks."""
+        from dataclasses import replace
+
+        from femstudy.meshing import landmarks
+
+        femur = self.femur
+        clamps = landmarks.clamps(femur.mesh, femur.frame, landmarks.outer_faces(femur.mesh, femur.frame),
+                                  case.clamps.length_mm)
+        femur = replace(femur, clamps=clamps)
+        channels = study_channels(self.system, self.patch, femur, case.analysis.exclusion_radius_mm,
+                                  case.clamps.length_mm)
+        return replace(self, case=case, femur=femur, channels=channels)
+
     def factorize(self, solver: str = "auto", keep: str | PathLike | None = None) -> fe.FactorizedSystem:
         """K_ff under the femur's clamps, factorised (or served by solutions kept in ``keep``,
         :mod:`femstudy.fe.kept`)."""

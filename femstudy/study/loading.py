@@ -2,8 +2,10 @@
 Allotta loading, sampled on the case's time grid (thesis §5.9), and the resolved history.
 
 Dynamic: the case's load model (``drilling.model``, "clogging" by default: cutting + chip
-evacuation; :mod:`femstudy.drilling.registry`) at its feed, speed, drill and bone set, with the
-hole's cortex equal to the drilled depth. Static: Allotta's
+evacuation; :mod:`femstudy.drilling.registry`) at its feed, speed, drill and bone set, through
+the bone the drill crosses at the site: the cortex as thick as it is along the drill axis
+(:class:`femstudy.femur_mesh.DrillSite`), then cancellous bone (cut at the bone set's u2) or the
+canal (nothing to cut), whatever the drilled depth (thesis §2.2). Static: Allotta's
 full-engagement thrust and torque, constant in time (the thesis's comparison load).
 Resolved: the dynamic loading with its per-flute oscillation and breakthrough release, on a
 grid that resolves both (:func:`resolved_loading`). Units: s, N, N·mm.
@@ -74,13 +76,17 @@ class CaseLoading:
 
 
 def drilled_depth_mm(case: Case, cortical_thickness_mm: float) -> float:
-    """The unicortical depth: the case's fixed depth, or the local cortex along the drill axis."""
+    """The drilled depth [mm]: the case's fixed depth, or through the local cortex along the
+    drill axis ("cortex": to breakthrough)."""
     return cortical_thickness_mm if case.drilling.depth_mm == "cortex" else float(case.drilling.depth_mm)
 
 
-def case_loading(case: Case, cortical_thickness_mm: float, bones_dir: Path | None = None) -> CaseLoading:
-    """Evaluate both loadings of ``case`` on its time grid (0 … end_s in step_s); calibrated
-    bone sets are looked up in ``bones_dir``."""
+def case_loading(case: Case, cortical_thickness_mm: float, bones_dir: Path | None = None,
+                 beyond_cortex: str = "cancellous") -> CaseLoading:
+    """Evaluate both loadings of ``case`` on its time grid (0 … end_s in step_s) for a cortex
+    ``cortical_thickness_mm`` thick along the drill axis with ``beyond_cortex`` past it
+    ("cancellous" or "canal"; both from the femur's :class:`~femstudy.femur_mesh.DrillSite`);
+    calibrated bone sets are looked up in ``bones_dir``."""
     drill = Drill(diameter_mm=case.drill.diameter_mm, point_angle_deg=case.drill.point_angle_deg)
     if case.drill.wall_mm is not None:
         drill = drill.with_(wall_mm=case.drill.wall_mm)
@@ -90,7 +96,8 @@ def case_loading(case: Case, cortical_thickness_mm: float, bones_dir: Path | Non
     if case.drilling.mu_f is not None or case.drilling.mu_w is not None:
         from_law = bone.friction(case.drilling.feed_mm_s, case.drilling.spindle_rpm)
         friction = (case.drilling.mu_f or from_law[0], case.drilling.mu_w or from_law[1])
-    cond = DrillingConditions(case.drilling.feed_mm_s, case.drilling.spindle_rpm, depth, bone, drill, friction)
+    cond = DrillingConditions(case.drilling.feed_mm_s, case.drilling.spindle_rpm, cortical_thickness_mm, bone, drill,
+                              friction, beyond_cortex)
     times = time_grid(cond, case.time.step_s, end_s=case.time.end_s)
     thrust, torque = cond.static_allotta()
     k = case.drilling.load_scale

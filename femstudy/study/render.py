@@ -44,7 +44,8 @@ def deformed_picture(path: Path, grid, site_point, site_direction, warp: float, 
     axis shows in profile, over the undeformed outline, with an arrow for the drill; save a PNG.
 
     The colour scale is capped at the ``cap_percentile`` of the surface values, so that the
-    local peak under the load patch does not leave the rest of the bone one colour.
+    local peak under the load patch does not leave the rest of the bone one colour; the picture
+    quotes no value of that peak (it grows under mesh refinement, docs/convergence.md).
     """
     pv = start_offscreen()
     undeformed = grid.extract_surface(algorithm="dataset_surface")
@@ -64,9 +65,8 @@ def deformed_picture(path: Path, grid, site_point, site_direction, warp: float, 
                      scalar_bar_args={"title": scalar_title, "vertical": True, "fmt": "%.3g",
                                       "position_x": 0.8, "position_y": 0.25, "width": 0.08})
     plotter.add_mesh(arrow, color="black")
-    unit = scalar_title[scalar_title.find("[") + 1:scalar_title.find("]")] if "[" in scalar_title else ""
-    cap = (f"\ncolour scale capped at the {cap_percentile:g}th percentile; peak {values.max():.3g} {unit} "
-           "under the drill") if capped else ""
+    cap = (f"\ncolour scale capped at the {cap_percentile:g}th percentile (the value under the load patch "
+           "is not a converged stress: report.md quotes the stresses near the hole)") if capped else ""
     plotter.add_text(f"{title}\ndeformation x{warp:g} (warp factor); grey outline: undeformed; arrow: drill{cap}",
                      font_size=11)
     side = np.cross(axis, direction)

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import math
+
 from femstudy.study.hole_report import hole_headline_cell, hole_section, hole_table_rows
 from femstudy.thesis import MAX_DEFLECTION_MM, MAX_VON_MISES_MPA
 
@@ -37,6 +39,29 @@ def out_of_range_banner(summary: dict) -> list[str]:
             + [f"- {f['check']}: {f['message']}" for f in found] + [""])
 
 
+def femur_paragraph(summary: dict) -> str:
+    """The user's bone as femstudy found it: the surface file, units and why, side, length, which
+    end is proximal, anterior, what the case file set, and the drill site's cortex."""
+    case, mesh, site = summary["case"], summary["mesh"], summary["site"]
+    frame = summary.get("frame") or {}
+    surface = case["geometry"]["surface"]
+    name = "femstudy's built-in femur" if surface == "builtin" else f"`{surface}`"
+    units = (frame.get("evidence") or {}).get("units") or {}
+    overridden = frame.get("overridden") or []
+    found = "all detected" if not overridden else "set in the case file: " + ", ".join(overridden)
+    beyond = {"canal": "the medullary canal", "cancellous": "cancellous bone"}.get(site.get("beyond_cortex"), "–")
+    return (f"Femur: {name}, a {frame.get('side', '?')} femur {mesh['length_mm']:.0f} mm long; units "
+            f"{frame.get('units', '?')} (×{frame.get('scale_to_mm', 1):g} to mm: {units.get('why', 'not recorded')}); "
+            f"proximal end {frame.get('evidence', {}).get('proximal_end', '?')} along the long axis "
+            f"{_vector(frame.get('up'))}, anterior {_vector(frame.get('anterior'))} ({found}; summary.json "
+            f"\"frame\" has the evidence). At the {site['name']} site the drill crosses "
+            f"{site['cortical_thickness_mm']:.2f} mm of cortex into {beyond}.")
+
+
+def _vector(v) -> str:
+    return "–" if v is None else "(" + ", ".join(f"{float(c):.3f}" for c in v) + ")"
+
+
 def run_report(summary: dict) -> str:
     """A short Markdown report a researcher can paste from."""
     case, mesh, site, load = summary["case"], summary["mesh"], summary["site"], summary["loading"]
@@ -51,8 +76,8 @@ def run_report(summary: dict) -> str:
     if hole:  # the patch's peak stress is mesh-dependent: the hole's measures replace it
         rows = rows[:2]
     lines = [f"# {case['name']}: drilling at the {site['name']} site", ""] + out_of_range_banner(summary) + [
-             case.get("description", ""), "",
-             f"Femur: {mesh['surface']} ({mesh['length_mm']:.0f} mm), {mesh['n_tets']:,} tetrahedra, "
+             case.get("description", ""), "", femur_paragraph(summary), "",
+             f"Mesh: {mesh['n_tets']:,} tetrahedra, "
              f"P{case['mesh']['order']} elements, {solver['dofs']:,} DOFs; both ends clamped over "
              f"{case['clamps']['length_mm']:g} mm. Drill Ø{case['drill']['diameter_mm']:g} mm at "
              f"f = {load['feed_mm_s']:g} mm/s, N = {load['spindle_rpm']:g} rpm, {load['depth_mm']:.2f} mm "
@@ -85,6 +110,10 @@ def run_report(summary: dict) -> str:
         if cortical.get("yield_MPa") and outside:
             lines.append(f"| cortical, outside {excl:g} mm of the patch | {_fmt(outside)} | {cortical['yield_MPa']:g} "
                          f"(yield) | {_fmt(cortical['yield_MPa'] / outside, 3)} |")
+    if summary.get("mesh_convergence"):
+        lines += ["", mesh_convergence_line(summary["mesh_convergence"])]
+    if summary.get("sensitivity"):
+        lines += [""] + sensitivity_section(summary["sensitivity"])
     if dyn.get("frequencies_Hz"):
         lines += ["", dynamics_paragraph(dyn, case["time"]["step_s"])]
     lines += ["", f"Solved with {solver['linear_solver']} in {summary['timings']['total_s']:.1f} s "
@@ -94,6 +123,54 @@ def run_report(summary: dict) -> str:
                   + (f" Fields for ParaView: {' and '.join(fields)} (`femstudy view` shows them)."
                      if (fields := summary.get('figures', {}).get('fields')) else ""), ""]
     return "\n".join(lines)
+
+
+def mesh_convergence_line(record: dict) -> str:
+    """What a recorded sweep says of this run's answers under global refinement, or that none did."""
+    found = record.get("quantities") or {}
+    if not found:
+        return f"**Global mesh convergence**: not assessed at {record['size_mm']:g} mm: {record['source']}."
+    parts = [f"{_answer(q) if q in ANSWER_WORDS or q.startswith('von_mises') else q.replace('hole_', '').replace('_', ' ')}"
+             f" {v['verdict']}" + (f" (±{100 * v['uncertainty']:.2g} %)" if v.get("uncertainty") is not None else "")
+             for q, v in found.items()]
+    return (f"**Global mesh convergence** at {record['size_mm']:g} mm, from the recorded sweep "
+            f"`{record['source']}`: " + "; ".join(parts) + ".")
+
+
+ANSWER_WORDS = {"max_deflection_mm": "max deflection", "drill_point_deflection_mm": "drill-point deflection",
+                "f1_Hz": "f1", "governing_margin": "governing margin"}
+
+
+def _answer(key: str) -> str:
+    if key in ANSWER_WORDS:
+        return ANSWER_WORDS[key]
+    if key.startswith("von_mises_beyond_"):
+        return "σ_vM beyond " + key[len("von_mises_beyond_"):-len("mm_MPa")] + " mm"
+    return "σ_vM at " + key[len("von_mises_"):-len("mm_MPa")] + " mm"
+
+
+def sensitivity_section(sens: dict) -> list[str]:
+    """The one-at-a-time table: each modelling choice's change of every answer [%], beside the
+    verification's uncertainty of the same answer."""
+    keys = list(sens["baseline"])
+    lines = ["**Sensitivity to modelling choices** (docs/study.md): each choice changed alone; the change of "
+             "every answer in per cent of the baseline (near-hole answers at the deepest station, "
+             f"{sens['station']}; deflections quasi-static; \"=\": the choice cannot change that answer). The last "
+             f"row is this run's own discretisation uncertainty of the same answers (its verification). Cost "
+             f"{sens['seconds']:.1f} s.", "",
+             "| choice | setting (baseline) | " + " | ".join(_answer(k) for k in keys) + " |",
+             "|---|---|" + "---|" * len(keys)]
+    lines.append("| baseline | | " + " | ".join(_fmt(sens["baseline"][k], 4) for k in keys) + " |")
+    for row in sens["rows"]:
+        cells = [("=" if row["changes_percent"].get(k) is None and not row.get("not_computed") else
+                  f"{row['changes_percent'][k]:+.1f} %" if row["changes_percent"].get(k) is not None
+                  and math.isfinite(row["changes_percent"][k]) else "–") for k in keys]
+        note = f" (not computed: {row['not_computed']})" if row.get("not_computed") else ""
+        lines.append(f"| {row['choice']} | {row['setting']} ({row['baseline']}){note} | " + " | ".join(cells) + " |")
+    mesh = sens.get("mesh_uncertainty_percent") or {}
+    lines.append("| discretisation (verification) | | " + " | ".join(
+        f"±{mesh[k]:.1f} %" if mesh.get(k) is not None and math.isfinite(mesh[k]) else "–" for k in keys) + " |")
+    return lines
 
 
 def dynamics_paragraph(dyn: dict, step_s: float) -> str:

@@ -38,15 +38,15 @@ from femstudy import atomic, fe
 from femstudy.casefile import Case, with_overrides
 from femstudy.execution import Executor, InProcess
 from femstudy.fe.linsolve import available_memory_bytes
-from femstudy.hole.study import hole_stresses
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.meshing.model import surface_file
-from femstudy.study import feasibility, output, plausibility, verdicts
+from femstudy.study import feasibility, mesh_convergence, output, plausibility, sensitivity
 from femstudy.study.femur import femur_spec
 from femstudy.study.global_model import GlobalModel, prepare
 from femstudy.study.loading import CaseLoading, case_loading, resolved_loading
 from femstudy.study.results import LoadingResult
 from femstudy.study.study_result import Dynamics, SolverRecord, StudyResult, Timings
+from femstudy.study.verification import analyse_hole
 
 log = logging.getLogger(__name__)
 
@@ -109,13 +109,13 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         case = with_overrides(case, {"mesh.size_mm": mesh_size_mm}, what="--mesh-size")
     feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force)
     out_of_range = plausibility.check_inputs(case, bones_dir, force)
-    record_path = case.convergence_path()
-    record = None if record_path is None else verdicts.read_record(record_path)  # a bad record fails now
     log.info("case '%s': building or loading the femur mesh", case.name)
     checked = time.perf_counter()
     model = prepare(case, cache_dir)
     out_of_range += plausibility.check_site(case, model.femur, force)
-    loading = case_loading(case, model.femur.site.cortical_thickness_mm, None if bones_dir is None else Path(bones_dir))
+    site = model.femur.site
+    loading = case_loading(case, site.cortical_thickness_mm, None if bones_dir is None else Path(bones_dir),
+                           site.beyond_cortex)
     out_of_range += plausibility.check_loads(loading, force)
     dyn = loading.dynamic
     log.info("loads: dynamic peak %.1f N / %.1f N.mm, static %.1f N / %.1f N.mm, %d steps of %g s",
@@ -135,8 +135,13 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         if case.loads.application == "hole":  # the global field per unit patch load drives the hole models
             inputs = loading.hole_inputs(case.materials.to_fe(), case.mesh.order, case.clamps.length_mm)
             hole_part = executor.start("hole models", partial(
-                hole_stresses, inputs, model.femur, model.system, fs.bc.expand(shapes), case.loads.hole_options(),
-                solver, solutions))
+                analyse_hole, inputs, model.femur, model.system, fs.bc.expand(shapes), case.loads.hole_options(),
+                solver, solutions, case.loads.verify))
+        sensitivity_part = None
+        if case.analysis.sensitivity:
+            sensitivity_part = executor.start("sensitivity", partial(
+                sensitivity.run_variants, case, model, loading, fs.bc.expand(shapes), solver, solutions, cache_dir,
+                case.loads.application == "hole", bool(case.analysis.modes)))
         step = _thesis_step(case, fs, model, loading, shapes)
         marched = time.perf_counter()
         files_part = None
@@ -145,15 +150,24 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
             files_part = executor.start("figures and fields", partial(output.write_files, folder, model, step,
                                                                       loading.times_s))
         dynamics, modal_done = _modes_and_resolved(case, loading, fs, model, shapes, step)
+        baseline = sensitivity.baseline_answers(fs, model, loading, dynamics.frequencies_Hz[0]
+                                                if dynamics.frequencies_Hz else None) if sensitivity_part else None
         fs.factor.close()  # the global solves are done (parts forked with it hold its pages until they end)
         resolved = time.perf_counter()
-        hole = None if hole_part is None else hole_part.result()
+        analysis = None if hole_part is None else hole_part.result()
+        hole = None if analysis is None else analysis.result
+        table = None
+        if sensitivity_part is not None:
+            runs = sensitivity_part.result()
+            table = sensitivity.sensitivity_table(runs.variants, sensitivity.with_hole(baseline, runs.baseline_hole),
+                                                  sensitivity.uncertainties(analysis),
+                                                  -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds)
         figures = None if files_part is None else files_part.result()
         waited = time.perf_counter()
         solver_record = SolverRecord(model.system.order, model.system.n_dofs, fs.method,
                                      fs.factor.factorisations + dynamics.refactorisations, fs.factor.served,
                                      model.system.timings,
-                                     None if hole is None else sum(s.factorisations for s in hole.stations))
+                                     None if analysis is None else analysis.factorisations)
         timings = Timings(mesh_s=checked - start + model.mesh_s,
                           assembly_s=assembled - checked - model.mesh_s,
                           factor_s=factorised - assembled, dynamic_s=marched - factorised,
@@ -162,15 +176,28 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                           files_s=None if files_part is None else files_part.seconds,
                           waited_for_parts_s=waited - resolved, parallel=bool(getattr(executor, "forking", False)),
                           total_s=time.perf_counter() - start)
-        convergence = None if hole is None else verdicts.applicable(record, verdicts.conditions(case))
         result = StudyResult(case, model.femur, loading, solver_record, step.dynamic, step.static, dynamics, hole,
-                             convergence, timings, datetime.now(timezone.utc).isoformat(timespec="seconds"),
-                             figures, None if out_dir is None else Path(out_dir))
+                             None if analysis is None else analysis.verification, timings,
+                             datetime.now(timezone.utc).isoformat(timespec="seconds"), figures,
+                             None if out_dir is None else Path(out_dir), sensitivity=table,
+                             mesh_convergence=_mesh_convergence(case, model, cache_dir))
         out_of_range += plausibility.check_results(result.to_json(), model.femur.frame.length_mm, force)
         result = replace(result, out_of_range=tuple(out_of_range))
         if folder is not None:
             output.write_summary(folder, result)
     return result
+
+
+def _mesh_convergence(case: Case, model: GlobalModel, cache_dir: Path) -> dict:
+    """What a recorded sweep of this case's settings says about its answers at this mesh size
+    (:mod:`femstudy.study.mesh_convergence`)."""
+    stats = model.femur.stats
+    h_rep = (float(stats["tet_volume_mm3"]) / model.system.n_tets) ** (1 / 3)
+    site = case.mesh.site_size_mm if case.mesh.refine == "site" else h_rep
+    measures = {"max_deflection_mm": h_rep, "drill_point_deflection_mm": h_rep,
+                "max_von_mises_excl_MPa": h_rep, "hole_von_mises_excl_MPa": site,
+                **{f"hole_von_mises_{d:g}mm_MPa": site for d in case.loads.distances_mm}}
+    return mesh_convergence.find(case, stats["surface_sha256"], cache_dir, case.mesh.size_mm, measures)
 
 
 @dataclass(frozen=True, eq=False)

@@ -22,8 +22,10 @@ from femstudy.meshing import FemurModel
 from femstudy.study import verdicts
 from femstudy.study.loading import CaseLoading
 from femstudy.study.results import LoadingResult, comparison
+from femstudy.study.sensitivity import Sensitivity
+from femstudy.study.verification import Verification
 
-PACKAGES = ("numpy", "scipy", "scikit-fem", "pytetwild", "pyvista", "meshio", "pypardiso")
+PACKAGES = ("numpy", "scipy", "scikit-fem", "pytetwild", "pyvista", "meshio", "mkl")
 
 
 def versions() -> dict:
@@ -165,13 +167,19 @@ class StudyResult:
     dynamics : Dynamics
     hole : HoleResult or None
         Stresses near the drilled hole, when ``case.loads.application == "hole"``.
-    convergence : dict or None
-        The verdicts the hole measures may use (:func:`femstudy.study.verdicts.applicable`).
+    verification : Verification or None
+        The verdicts of the near-hole measures measured in the run
+        (:mod:`femstudy.study.verification`), when the case asks for them.
     timings : Timings
     figures : Figures or None
         When a results folder was written with pictures.
     out_dir : Path or None
         The results folder, when one was written.
+    mesh_convergence : dict or None
+        What a recorded ``femstudy sweep`` of the case's settings says of its answers at this mesh
+        size (:func:`femstudy.study.mesh_convergence.find`).
+    sensitivity : Sensitivity or None
+        How much each modelling choice moves the answers (:mod:`femstudy.study.sensitivity`).
     out_of_range : tuple of dict
         The plausibility gates the study failed and ran past with ``force``
         (:mod:`femstudy.study.plausibility`; empty for a study in range).
@@ -186,12 +194,14 @@ class StudyResult:
     static: LoadingResult
     dynamics: Dynamics
     hole: HoleResult | None
-    convergence: dict | None
+    verification: Verification | None
     timings: Timings
     created_utc: str
     figures: Figures | None = None
     out_dir: Path | None = None
     out_of_range: tuple = ()
+    sensitivity: Sensitivity | None = None
+    mesh_convergence: dict | None = None
     package_versions: dict = field(default_factory=versions)
 
     def peak(self, quantity: str, loading: str = "dynamic"):
@@ -205,10 +215,10 @@ class StudyResult:
         return timeseries_rows([self.dynamic, self.static])
 
     def margins(self) -> dict:
-        """Margins to failure: the hole's, each row with its convergence verdict and the governing
+        """Margins to failure: the hole's, each row with its verdict and band and the governing
         ones (:func:`femstudy.study.verdicts.gate`), or per region from the patch's peaks."""
         if self.hole is not None:
-            return verdicts.gate(self.hole.margins(), self.convergence)
+            return verdicts.gate(self.hole.margins(), self.verification)
         return {"dynamic": self.dynamic.margins(), "static": self.static.margins()}
 
     def to_json(self) -> dict:
@@ -225,10 +235,12 @@ class StudyResult:
             "case": case.model_dump(mode="json"),
             "mesh": {**femur.stats, "quality": femur.quality, "surface": case.geometry.surface,
                      "length_mm": float(femur.frame.length_mm)},
+            "frame": femur.frame.as_dict(),
             "site": {"name": case.site.name, "entry_point_mm": [float(x) for x in site.entry_point],
                      "direction": [float(x) for x in site.direction],
                      "outward_normal": [float(x) for x in site.outward_normal],
                      "cortical_thickness_mm": float(site.cortical_thickness_mm),
+                     "beyond_cortex": site.beyond_cortex,
                      "load_patch_radius_mm": case.drill.diameter_mm / 2},
             "loading": {"feed_mm_s": cond.feed_mm_s, "spindle_rpm": cond.spindle_rpm,
                         "feed_per_rev_mm": cond.feed_per_rev_mm, "bone_set": cond.bone.name,
@@ -245,8 +257,13 @@ class StudyResult:
             "timings": self.timings.as_dict(),
         }
         if self.hole is not None:
-            out["hole"] = {**self.hole.to_json(), "convergence": self.convergence, "margins": margins}
+            out["hole"] = {**self.hole.to_json(), "margins": margins,
+                           "verification": None if self.verification is None else self.verification.to_json()}
         if self.figures is not None:
             out["figures"] = self.figures.as_dict()
+        if self.sensitivity is not None:
+            out["sensitivity"] = self.sensitivity.to_json()
+        if self.mesh_convergence is not None:
+            out["mesh_convergence"] = self.mesh_convergence
         out["out_of_range"] = list(self.out_of_range)
         return jsonable(out)

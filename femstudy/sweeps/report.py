@@ -17,9 +17,10 @@ MESH_COLUMNS = ["point", "size_mm", "order", "refine", "site_size_mm", "envelope
                 "hole_von_mises_2mm_MPa", "hole_von_mises_5mm_MPa", "hole_von_mises_excl_MPa", "mesh_s", "tetwild_s",
                 "mesh_cache_hit", "assembly_s", "solve_s", "hole_s"]
 #: quantity -> (formal order for P1, for P2, singular in the continuum?, local?). A local
-#: quantity's mesh measure is the drill site's element size, a global one's (V/N)^(1/3), a
-#: "hole" one's the drilled-hole model's element size at the wall (docs/hole.md): the largest
-#: von Mises stress at 0.5/1/2/5 mm from the hole wall and beyond the quoted exclusion radius.
+#: quantity's mesh measure is the drill site's element size, a global one's (V/N)^(1/3). The
+#: "hole" ones (the largest von Mises stress at 0.5/1/2/5 mm from the hole wall and beyond the
+#: quoted exclusion radius, docs/hole.md) keep their local models' refinement at every size, so
+#: the ladder measures what the global mesh does to them: their measure is the site's.
 QUANTITIES = {"max_deflection_mm": (2, 3, False, False), "drill_point_deflection_mm": (2, 3, False, False),
               "max_von_mises_MPa": (1, 2, True, True), "max_von_mises_excl_MPa": (1, 2, False, False),
               **{f"hole_von_mises_{d}mm_MPa": (1, 2, False, "hole") for d in ("0.5", "1", "2", "5")},
@@ -58,27 +59,25 @@ def groups(rows: list[dict]) -> dict[tuple, list[dict]]:
 
 
 def remeshing_noise(rows: list[dict], quantities) -> dict:
-    """Per (order, refine) group and quantity, the relative difference |a − b| / min(|a|, |b|)
-    between two meshes of one size (the remeshed point and its original); 0 without a pair."""
+    """Per (order, refine) group and quantity, the relative range (max − min) / |mean| over the
+    meshes of one size (the remeshed points and their original); 0 without replicates."""
     out: dict = {}
     for row in rows:
-        twin = next((r for r in rows if r is not row and r["order"] == row["order"] and r["refine"] == row["refine"]
-                     and r["size_mm"] == row["size_mm"]), None)
         group = out.setdefault(f"P{row['order']}-{row['refine']}", {q: 0.0 for q in quantities})
-        if twin is not None:
-            for q in quantities:
-                a, b = row.get(q), twin.get(q)
-                if a is not None and b is not None and a != 0 and np.isfinite(a) and np.isfinite(b):
-                    group[q] = max(group[q], abs(a - b) / abs(a))
+        same = [r for r in rows if r["order"] == row["order"] and r["refine"] == row["refine"]
+                and r["size_mm"] == row["size_mm"]]
+        if len(same) < 2:
+            continue
+        for q in quantities:
+            values = [r.get(q) for r in same]
+            if all(v is not None and np.isfinite(v) for v in values) and np.mean(values) != 0:
+                group[q] = max(group[q], (max(values) - min(values)) / abs(float(np.mean(values))))
     return out
 
 
 def mesh_measure(row: dict, local: bool) -> float:
-    """The mesh size [mm] a quantity converges with: the hole model's wall element size for a
-    "hole" one, the site's element size for a local one (when the site is refined), the
-    representative (V/N)^(1/3) otherwise."""
-    if local == "hole":
-        return row["hole_h_mm"]
+    """The mesh size [mm] a quantity converges with: the site's element size for a local or hole
+    one (when the site is refined), the representative (V/N)^(1/3) otherwise."""
     return row["site_size_mm"] if local and row.get("site_size_mm") else row["h_rep_mm"]
 
 

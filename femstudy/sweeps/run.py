@@ -166,18 +166,37 @@ def _mesh_sweep(case_path: Path, sizes, order, refine, target, out, options) -> 
     folder = _claim(out or Path("results") / f"sweep-{case.name}", case_path, options)
     rows = [{"point": r["point"]["label"], **r["result"]} for r in _execute(points, case, case_path, folder, options)]
     assessment = report.convergence(rows, target)
+    _record(case, sizes, assessment, options["cache_dir"], case_path)
     atomic.write_text(folder / "sweep.csv", report.table_csv(rows, report.MESH_COLUMNS))
     atomic.write_text(folder / "convergence.json", json.dumps(assessment, indent=2, default=float))
     figures = report.plots(folder, rows, assessment)
     text = "\n".join([f"# Mesh convergence: {case.name}", "",
                       f"Static solve under the peak dynamic drilling load; site size scaled with the global size. "
                       f"Sizes {', '.join(f'{s:g}' for s in sorted(set(sizes), reverse=True))} mm; the middle size "
-                      "meshed twice (\"remeshed\") to measure TetWild's remeshing noise.", "",
+                      "meshed three times (\"remeshed\") to measure TetWild's remeshing noise; the hole models keep "
+                      "the case's refinement at every size (each run verifies them itself).", "",
                       report.table_markdown(rows, report.MESH_COLUMNS), "", "## Convergence (three finest meshes)", "",
                       report.convergence_markdown(assessment, target), "",
                       " ".join(f"![{f}]({f})" for f in figures), ""])
     atomic.write_text(folder / "sweep.md", text)
     return SweepResult("mesh", rows, report.MESH_COLUMNS, assessment, folder, text)
+
+
+def _record(case, sizes, assessment: dict, cache_dir: Path, case_path: Path) -> None:
+    """Store each group's verdicts in the cache, for the runs of this case's settings to pick up
+    (:mod:`femstudy.study.mesh_convergence`)."""
+    from femstudy.casefile import with_overrides
+    from femstudy.meshing.model import surface_file
+    from femstudy.meshing.surface import file_digest
+    from femstudy.study.femur import femur_spec
+    from femstudy.study.mesh_convergence import write_record
+
+    digest = file_digest(surface_file(femur_spec(case), cache_dir))
+    command = f"femstudy sweep {case_path} --sizes {','.join(f'{s:g}' for s in sorted(set(sizes), reverse=True))}"
+    for group, entry in assessment.items():
+        order, refine = group[1:].split("-")
+        variant = with_overrides(case, {"mesh.order": int(order), "mesh.refine": refine})
+        write_record(variant, digest, cache_dir, group, entry, [float(s) for s in sizes], f"{command} ({group})")
 
 
 def _claim(folder: Path, case_path: Path, options: dict, *inputs) -> Path:

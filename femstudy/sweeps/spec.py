@@ -41,8 +41,9 @@ from femstudy.schema import parse_toml
 from femstudy.sweeps.execute import Point
 
 
-#: The remeshed point's envelope differs by this factor: a new TetWild run of the same request.
-REMESH_FACTOR = 1.000001
+#: The remeshed points' envelopes differ by these factors: new TetWild runs of the same request,
+#: which with the original make three meshes of one size for the remeshing noise.
+REMESH_FACTORS = (1.000001, 1.000002)
 #: Most points one sweep runs (each is a mesh or a whole study: seconds to minutes); a larger
 #: grid is refused before it is expanded. Split it into several sweeps.
 MAX_POINTS = 1000
@@ -53,9 +54,11 @@ MIN_SIZES = 3
 
 def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list[str],
                 remesh: bool = True) -> list[Point]:
-    """One point per (size, order, refinement); with ``remesh``, the middle size once more
-    with its TetWild envelope changed by one part in a million, so that TetWild meshes the
-    same request again: the two differ by the remeshing noise."""
+    """One point per (size, order, refinement); with ``remesh``, the middle size twice more
+    with its TetWild envelope changed by parts in a million, so that TetWild meshes the same
+    request again: the three differ by the remeshing noise. The hole models keep the case's
+    refinement at every size (the run verifies them itself): the ladder refines the global mesh
+    only, whose field drives them."""
     require(len(sizes) > 0 and all(math.isfinite(s) and s > 0 for s in sizes),
             f"--sizes must be positive lengths in mm, got {sizes}")
     distinct = sorted(set(float(s) for s in sizes), reverse=True)
@@ -70,15 +73,14 @@ def mesh_points(case: Case, sizes: list[float], orders: list[int], refines: list
     again = [ladder[len(ladder) // 2]] if remesh and len(ladder) >= 3 else []
     points = []
     for order, refine in itertools.product(orders, refines):
-        for size, factor in [(s, 1.0) for s in ladder] + [(s, REMESH_FACTOR) for s in again]:
+        for size, factor in [(s, 1.0) for s in ladder] + [(s, f) for s in again for f in REMESH_FACTORS]:
             overrides = {"mesh.size_mm": float(size), "mesh.order": order, "mesh.refine": refine,
                          "mesh.envelope": min(0.05, round(float(size) * envelope_per_mm * factor, 12))}
             if refine == "site":
                 overrides["mesh.site_size_mm"] = round(float(size) * ratio, 6)
-            if case.loads.application == "hole":  # the hole model refines with the ladder (docs/hole.md)
-                overrides["loads.refinement"] = round(case.loads.refinement * case.mesh.size_mm / float(size), 6)
             points.append(Point("mesh", overrides,
-                                label=f"P{order} {refine} {size:g} mm" + (" (remeshed)" if factor != 1 else "")))
+                                label=f"P{order} {refine} {size:g} mm" + (f" (remeshed {REMESH_FACTORS.index(factor) + 1})"
+                                                                          if factor != 1 else "")))
     for p in points:  # validate every point before any work
         with_overrides(case, p.overrides)
     return points

@@ -43,7 +43,6 @@ class FemurBase:
     case, model, loading : the case, its :class:`femstudy.GlobalModel` and nominal :class:`femstudy.CaseLoading`
     units : nominal unit responses; distributions : input name → :class:`Distribution`
     basis : the reduced bases (None when no stiffness input varies)
-    convergence : the hole verdicts the case's record admits
     """
 
     case: object
@@ -52,7 +51,6 @@ class FemurBase:
     units: UnitResponses
     distributions: dict
     basis: ReducedBases | None
-    convergence: dict
     solver: str
     keep: Path | None
     seconds: float
@@ -74,7 +72,6 @@ def femur_base(case, cache_dir: Path, solver: str = "auto", bones_dir: Path | No
     """Prepare ``case``'s femur for sampling; ``design`` (unit-cube samples) trains the reduced
     basis on its stiffness points, stored in (or read back from) ``basis_file``."""
     from femstudy.drilling import load_bone_set
-    from femstudy.study import verdicts
     from femstudy.study.global_model import prepare
     from femstudy.study.loading import case_loading
 
@@ -88,10 +85,7 @@ def femur_base(case, cache_dir: Path, solver: str = "auto", bones_dir: Path | No
     finally:
         fs.factor.close()
     units = UnitResponses.of(shapes, model.patch)
-    record_path = case.convergence_path()
-    convergence = verdicts.applicable(None if record_path is None else verdicts.read_record(record_path),
-                                      verdicts.conditions(case))
-    base = FemurBase(case, model, loading, units, dists, None, convergence, solver, keep, 0.0)
+    base = FemurBase(case, model, loading, units, dists, None, solver, keep, 0.0)
     if any(n in STIFFNESS_INPUTS for n in dists):
         base.basis = _basis(base, shapes, design, basis_file)
     base.seconds = time.perf_counter() - start
@@ -200,7 +194,7 @@ def _hole(base: FemurBase, values: dict, unit_fields: np.ndarray) -> tuple[dict,
     inputs = sample_loading(base.loading, values).hole_inputs(materials, case.mesh.order, stiff.clamp_length_mm)
     result = hole_stresses(inputs, base.model.femur, base.model.system, unit_fields, case.loads.hole_options(),
                            base.solver, base.keep if nominal_stiffness else None)
-    return hole_outputs(result, base.convergence)
+    return hole_outputs(result)
 
 
 def distribution_table(dists: dict[str, Distribution]) -> dict:

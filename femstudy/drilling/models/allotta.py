@@ -7,10 +7,11 @@ from femstudy.drilling.registry import LoadModel, LoadParts, register
 
 
 def cutting_parts(cond, t_s, depth_mm, content) -> LoadParts:
-    """Allotta's thrust and torque of the engaged cone at each depth; no evacuation part."""
+    """Allotta's thrust and torque of the engaged cone at each depth (u1 in the cortex, the
+    conditions' u2 beyond it); no evacuation part."""
     a, h, drill, bone = cond.feed_per_rev_mm, cond.cortex_mm, cond.drill, cond.bone
-    F = allotta.thrust(depth_mm, a, h, bone.u1_MPa, bone.u2_MPa, drill)
-    T = allotta.torque(depth_mm, a, h, bone.u1_MPa, bone.u2_MPa, drill)
+    F = allotta.thrust(depth_mm, a, h, bone.u1_MPa, cond.u2_MPa, drill)
+    T = allotta.torque(depth_mm, a, h, bone.u1_MPa, cond.u2_MPa, drill)
     zero = np.zeros_like(np.asarray(depth_mm, float))
     return LoadParts(F, T, zero, zero)
 

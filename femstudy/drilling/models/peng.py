@@ -18,10 +18,11 @@ def peng_parts(cond, t_s, depth_mm, content) -> LoadParts:
     """Peng's thrust and torque in the cortex and in cancellous bone; no evacuation part."""
     d, a, h, drill, bone = depth_mm, cond.feed_per_rev_mm, cond.cortex_mm, cond.drill, cond.bone
     in_cortex, in_cancellous = (d > 0) & (d <= h), d > h
+    beyond = cond.beyond_cortex == "cancellous"  # nothing to cut in the canal
     F = in_cortex * literature.peng_thrust(a, bone.u1_MPa, drill) + in_cancellous * literature.peng_thrust(
-        a, bone.u2_MPa, drill)
+        a, cond.u2_MPa, drill)
     T = (in_cortex * literature.peng_torque(a, CORTICAL_TENSILE_STRENGTH_MPA, drill)
-         + in_cancellous * literature.peng_torque(a, CANCELLOUS_STRENGTH_MPA, drill))
+         + in_cancellous * beyond * literature.peng_torque(a, CANCELLOUS_STRENGTH_MPA, drill))
     zero = np.zeros_like(np.asarray(d, float))
     return LoadParts(np.asarray(F, float), np.asarray(T, float), zero, zero)
 
