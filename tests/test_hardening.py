@@ -213,7 +213,7 @@ def test_a_number_that_is_not_a_finite_number_in_range_is_refused(section, data,
 CLI_REFUSALS = [  # (name, case-file replacements or None, extra arguments, expected text)
     ("feed given as true", [("feed_mm_s = 2.0", "feed_mm_s = true")], [], "drilling.feed_mm_s: Input should be a valid number, got True"),
     ("spindle nearly stopped", [("spindle_rpm = 1500", "spindle_rpm = 1e-9")], [], "drilling.spindle_rpm"),
-    ("Young's modulus 1e-300", [("[loads]", "[materials.cortical]\nyoungs_modulus_GPa = 1e-300\n[loads]")], [],
+    ("Young's modulus 1e-300", [("[time]", "[materials.cortical]\nyoungs_modulus_GPa = 1e-300\n[time]")], [],
      "materials.cortical.youngs_modulus_GPa"),
     ("Rayleigh damping inf", [("[time]", "[analysis]\nrayleigh_alpha_per_s = inf\n[time]")], [], "finite number"),
     ("site size 1e-6", [("site_size_mm = 1.0", "site_size_mm = 1e-6")], [], "mesh.site_size_mm"),

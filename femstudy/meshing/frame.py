@@ -106,7 +106,9 @@ def units_evidence(extent: float, unit: str, requested: str) -> dict:
 
 def detect_units(extent: float, requested: str) -> tuple[str, float, list[str]]:
     """Unit name and scale to mm for a femur whose raw length is ``extent``; a unit other than mm
-    found automatically is announced in one warning that shows the length under every unit."""
+    found automatically is announced in one progress line that shows the length under every unit
+    (report.md and summary.json say the units and why); a warning would be a second message
+    beside a user error found later in the same run."""
     if requested != "auto":
         length_mm = extent * UNIT_SCALE[requested]
         lo, hi = UNIT_RANGES["mm"]
@@ -120,7 +122,7 @@ def detect_units(extent: float, requested: str) -> tuple[str, float, list[str]]:
         if lo <= extent <= hi:
             if unit != "mm":
                 lengths = ", ".join(f"{extent * UNIT_SCALE[u]:.4g} mm as {u}" for u in UNIT_SCALE)
-                log.warning("the surface is %.4g long in its own units, read as %s (%s); set geometry.units if it "
+                log.info("the surface is %.4g long in its own units, read as %s (%s); set geometry.units if it "
                             "is not in %s", extent, unit, lengths, unit)
             return unit, UNIT_SCALE[unit], []
     lengths = ", ".join(f"{extent * UNIT_SCALE[u]:.4g} mm as {u}" for u in UNIT_SCALE)
