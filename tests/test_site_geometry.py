@@ -88,10 +88,10 @@ def test_the_strain_criterion_is_the_load_factor_to_the_first_limit():
 
 
 def test_units_other_than_mm_are_said_in_one_line_with_every_length(caplog):
-    with caplog.at_level(logging.WARNING, logger="femstudy"):
+    with caplog.at_level(logging.INFO, logger="femstudy"):
         assert detect_units(9.3, "auto")[0] == "in"
-    warning = caplog.records[-1].getMessage()
-    assert "read as in" in warning and "236.2 mm as in" in warning and "9.3 mm as mm" in warning
-    with caplog.at_level(logging.WARNING, logger="femstudy"):
+    line = caplog.records[-1].getMessage()
+    assert "read as in" in line and "236.2 mm as in" in line and "9.3 mm as mm" in line
+    with caplog.at_level(logging.INFO, logger="femstudy"):
         assert detect_units(455.0, "auto")[0] == "mm"
     assert all("read as mm" not in r.getMessage() for r in caplog.records)
