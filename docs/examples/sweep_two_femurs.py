@@ -18,6 +18,7 @@ name = "two-femurs"
 size_mm = {size}
 [analysis]
 resolved = false
+sensitivity = false   # the sweep itself compares the two femurs; no modelling-choice table per point
 [output]
 fields = false
 figures = false
