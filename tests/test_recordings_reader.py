@@ -98,7 +98,6 @@ BAD = [
     (HEADER + "time_s,thrust_N\n0,1\n0.001,\n", "line 5: an empty field in column 2 is not a number"),
     (HEADER + "time_s,thrust_N\n0,1\n0.001,abc\n", "line 5: abc in column 2 is not a number"),
     (HEADER + "time_s,thrust_N\n0,1\n0.001\n", "line 5: 1 values, expected one per column"),
-    (HEADER + "time_s,thrust_N\n0,1\n0.001,2\n0.001,3\n0.003,1\n", "time_s repeats at line 6"),
     (HEADER + "time_s,thrust_N\n0,1\n0.002,2\n0.001,3\n0.003,1\n", "time_s goes backwards at line 6"),
     (HEADER + "time_s,thrust_N\n" + "".join(f"{k * 0.02},{k % 3}\n" for k in range(200)),
      "sampled at 50 Hz; femstudy accepts 100 Hz to 10 kHz"),
@@ -147,3 +146,42 @@ def test_clean_synthetic_recording_reads_back_without_notes(tmp_path):
     back = read_recording(tmp_path / "c.csv")
     assert back.sample_rate_hz == pytest.approx(500)
     np.testing.assert_allclose(back.torque_Nmm, rec.torque_Nmm, rtol=1e-5, atol=1e-6)
+
+
+def _stamped(tmp_path, stamps, fmt="%.6f"):
+    body = "".join(f"{fmt % t},{1 + (k % 7)},{2 + k % 5}\n" for k, t in enumerate(stamps))
+    path = tmp_path / "rec.csv"
+    path.write_text(HEADER + "time_s,thrust_N,torque_Nmm\n" + body)
+    return read_recording(path)
+
+
+def test_repeated_stamps_are_merged_into_the_mean_of_their_rows(tmp_path):
+    """A logger whose clock is coarser than its sampling (1 ms at 2 kHz) stamps two rows alike; a
+    buffer written twice repeats a row. Each set of rows sharing a stamp becomes their mean."""
+    stamps = (np.arange(400) // 2) * 1e-3                           # 2 kHz, stamped to the millisecond
+    rec = _stamped(tmp_path, stamps)
+    assert rec.time_s.size == 200 and np.all(np.diff(rec.time_s) > 0)
+    assert rec.thrust_N[0] == pytest.approx((1 + 2) / 2)           # rows 0 and 1: thrust 1 and 2
+    assert any("200 repeated time stamp(s) (400 rows) were merged" in n for n in rec.notes)
+
+
+def test_clock_jitter_out_of_order_stamps_are_ordered_a_jump_back_is_refused(tmp_path):
+    t = np.arange(400) * 1e-3
+    t[50], t[51] = 0.0502, 0.0498                                   # 0.4 ms apart, written in the wrong order
+    rec = _stamped(tmp_path, t)
+    assert np.all(np.diff(rec.time_s) > 0) and rec.time_s.size == 400
+    assert any("1 time stamp(s) out of order" in n for n in rec.notes)
+    t = np.arange(400) * 1e-3
+    t[200:] -= 0.05                                                 # 50 samples back: two records spliced
+    with pytest.raises(UserError, match="goes backwards"):
+        _stamped(tmp_path, t)
+
+
+def test_epoch_stamps_count_from_the_first_sample(tmp_path):
+    """Unix time (1.7e9 s + t) in float64 reads as t, with the origin kept in the metadata."""
+    t = np.arange(400) * 1e-3
+    plain = _stamped(tmp_path, t)
+    epoch = _stamped(tmp_path, 1.7e9 + 12.345 + t)
+    np.testing.assert_allclose(epoch.time_s, plain.time_s, atol=2e-6)
+    assert epoch.metadata["time_origin_s"] == pytest.approx(1.7e9 + 12.345)
+    assert any("an absolute clock" in n for n in epoch.notes) and plain.notes == ()

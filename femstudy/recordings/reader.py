@@ -15,8 +15,10 @@ Defaults: ``drill_diameter_mm = 2.7``, ``point_angle_deg = 90``. Any other key i
 (synthetic recordings store their effect parameters and ground truth this way), and
 ``contact_s``/``cut_end_s`` override the automatic isolation of the cut.
 
-Every mistake is one :class:`~femstudy.errors.UserError` sentence naming the file, and the
-line, row, property or variable where that helps.
+Time stamps as data loggers write them are made usable with a note (:func:`daq_time`): an
+absolute clock is counted from the first sample, stamps out of order by clock jitter are ordered,
+repeated stamps are merged. Every mistake is one :class:`~femstudy.errors.UserError` sentence
+naming the file, and the line, row, property or variable where that helps.
 """
 
 from __future__ import annotations
@@ -143,21 +145,84 @@ def read_recording(path: str | os.PathLike, overrides: Mapping[str, Any] | None 
         raise UserError(f"recording {name} is not a text (UTF-8) CSV file") from None
     except OSError as exc:
         raise UserError(f"cannot read recording {path}: {exc.strerror or exc}") from None
-    values = {c.quantity: a * c.factor for c, a in zip(channels, arrays)}
+    values = {c.quantity: np.asarray(a, dtype=np.float64) * c.factor for c, a in zip(channels, arrays)}
     notes += [f"{c.label} converted from {c.unit} to {_SOLVER_UNIT_WORDS[QUANTITY_UNITS[c.quantity][0]]} "
               f"(x{c.factor:g})" for c in channels if c.factor != 1.0]
+    labels = {c.quantity: (c.label, c.unit) for c in channels}
     rec = Recording(time_s=values["time"], thrust_N=values["thrust"], torque_Nmm=values.get("torque"),
                     depth_mm=values.get("depth"), fx_N=values.get("fx"), fy_N=values.get("fy"),
                     metadata=metadata, source=str(path), notes=tuple(notes))
-    check_recording(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
-    check_values(rec, table.where, {c.quantity: (c.label, c.unit) for c in channels})
+    declared = rec.metadata.get("samples")  # before daq_time merges repeated stamps
+    require(declared is None or declared == rec.time_s.size,
+            f"recording {name}: the header says samples = {declared} but the file has {rec.time_s.size} data "
+            f"rows (truncated?)")
+    rec = daq_time(rec)
+    check_recording(rec, table.where, labels)
+    check_values(rec, table.where, labels)
     return rec
+
+
+#: A first time stamp this large, and this many times the record's span, is an absolute clock [s].
+ABSOLUTE_CLOCK_S = 1e5
+ABSOLUTE_CLOCK_SPANS = 1000.0
+#: Backward steps shorter than this fraction of the median step are clock jitter, and are ordered.
+JITTER_STEPS = 0.5
+
+
+def daq_time(rec: Recording) -> Recording:
+    """Time stamps as data loggers write them, made usable, with one note per change:
+
+    - an absolute clock (the first stamp over ``ABSOLUTE_CLOCK_S`` and ``ABSOLUTE_CLOCK_SPANS``
+      times the span, e.g. Unix time): counted from the first sample in float64, so 1.7e9 s + t
+      diagnoses as t (``time_origin_s`` in the metadata; ``contact_s``/``cut_end_s`` follow);
+    - stamps out of order by less than ``JITTER_STEPS`` of the median step (clock jitter): ordered;
+    - repeated stamps (a logger's coarse clock, a buffer written twice): the rows sharing a stamp
+      are merged into their mean.
+
+    Anything else (a large backward jump) is left for :func:`check_recording` to refuse."""
+    t = np.asarray(rec.time_s, dtype=np.float64)
+    if t.size < 3:
+        return rec
+    arrays = {k: getattr(rec, k) for k in ("thrust_N", "torque_Nmm", "depth_mm", "fx_N", "fy_N")}
+    notes = list(rec.notes)
+    metadata = dict(rec.metadata)
+    origin = float(t[0])
+    if abs(origin) > ABSOLUTE_CLOCK_S and abs(origin) > ABSOLUTE_CLOCK_SPANS * max(float(t[-1] - t[0]), 1e-9):
+        t = t - origin
+        metadata["time_origin_s"] = origin
+        for key in ("contact_s", "cut_end_s"):
+            if isinstance(metadata.get(key), (int, float)) and abs(metadata[key]) > ABSOLUTE_CLOCK_S:
+                metadata[key] = float(metadata[key]) - origin
+        notes.append(f"time stamps start at {origin:.6f} s (an absolute clock): times are counted from the first sample")
+    steps = np.diff(t)
+    positive = steps[steps > 0]
+    if positive.size and np.any(steps < 0):
+        typical = float(np.median(positive))
+        back = steps[steps < 0]
+        if np.all(-back < JITTER_STEPS * typical):
+            order = np.argsort(t, kind="stable")
+            t = t[order]
+            arrays = {k: None if v is None else np.asarray(v)[order] for k, v in arrays.items()}
+            notes.append(f"{back.size} time stamp(s) out of order by less than half a sample (clock jitter) were put in "
+                         f"order")
+    if np.any(np.diff(t) == 0) and not np.any(np.diff(t) < 0):
+        first = np.concatenate([[True], np.diff(t) != 0])
+        group = np.cumsum(first) - 1
+        counts = np.bincount(group)
+        merged = {k: None if v is None else np.bincount(group, weights=np.asarray(v, float)) / counts
+                  for k, v in arrays.items()}
+        notes.append(f"{int(np.count_nonzero(counts > 1))} repeated time stamp(s) ({int(np.sum(counts[counts > 1]))} rows) "
+                     f"were merged, each into the mean of its rows")
+        t, arrays = t[first], merged
+    if len(notes) == len(rec.notes):
+        return rec
+    return Recording(time_s=t, metadata=metadata, source=rec.source, notes=tuple(notes), **arrays)
 
 
 def check_recording(rec: Recording, where: Callable[[int], str] | None = None,
                     columns: Mapping[str, tuple[str, str]] | None = None) -> None:
-    """Raise a UserError unless the samples are usable: finite, time strictly increasing,
-    100 Hz–10 kHz, longer than one spindle revolution, a thrust that varies.
+    """Raise a UserError unless the samples are usable: finite, time strictly increasing (after
+    :func:`daq_time`), 100 Hz–10 kHz, longer than one spindle revolution, a thrust that varies.
 
     ``where(row)`` names a data row in the file's terms ("line 12"); ``columns`` maps a
     quantity to its column's (name, unit) as written, for the messages.
@@ -176,10 +241,6 @@ def check_recording(rec: Recording, where: Callable[[int], str] | None = None,
             row = int(np.flatnonzero(~np.isfinite(values))[0])
             raise UserError(f"recording {name}: {label} is {values[row]} at {where(row)}; every value "
                             f"must be a finite number")
-    declared = rec.metadata.get("samples")
-    require(declared is None or declared == n,
-            f"recording {name}: the header says samples = {declared} but the file has {n} data "
-            f"rows (truncated?)")
     require(n >= 3, f"recording {name} has only {n} data rows")
     steps = np.diff(rec.time_s)
     if np.any(steps <= 0):
