@@ -24,8 +24,8 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-#: The marker file of a folder femstudy wrote whole: JSON with the files it holds.
-MARKER = ".femstudy.json"
+from femstudy.marker import MARKER, written_files
+
 #: Temporary sibling folders: ``.<name>.partial-<pid>-<random>`` (a folder being built) and
 #: ``.<name>.old-<pid>`` (the folder it replaces, while swapping).
 _LEFTOVER = re.compile(r"^\..*\.(?:partial-(\d+)-[^/]*|old-(\d+))$")
@@ -90,11 +90,6 @@ def write_text(target: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``target`` atomically (UTF-8)."""
     with atomic_path(target) as tmp:
         tmp.write_text(text, encoding="utf-8")
-
-
-def written_files(folder: Path) -> list[str]:
-    """Every file and folder under ``folder`` (relative POSIX paths), the marker excepted."""
-    return sorted(p.relative_to(folder).as_posix() for p in Path(folder).rglob("*") if p.name != MARKER)
 
 
 def _mark(folder: Path, files: list[str] | None) -> None:

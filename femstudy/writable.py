@@ -2,7 +2,7 @@
 
 A folder femstudy writes whole (results, mesh outputs, calibration tables, diagnosis reports,
 data sets) replaces what is at its place, so that place must be empty, absent, or a folder
-femstudy wrote and nothing else touched: its marker (:data:`femstudy.atomic.MARKER`) lists
+femstudy wrote and nothing else touched: its marker (:data:`femstudy.marker.MARKER`) lists
 every file in it. Never the working folder or one of its parents (``.``, ``..``), the mesh
 cache or anything in it, nor a folder holding the inputs. A file output must not be a folder
 or one of the inputs. Each refusal is one :class:`~femstudy.errors.UserError` sentence.
@@ -34,7 +34,7 @@ def _not_the_working_folder(target: Path, where: str) -> None:
 def check_replaceable_folder(target: str | os.PathLike, what: str = "results") -> None:
     """Raise :class:`UserError` unless a folder femstudy builds may take the place of
     ``target``: absent, empty, or written by femstudy (its marker lists everything in it)."""
-    from femstudy.atomic import MARKER, written_files
+    from femstudy.marker import MARKER, written_files
 
     target = Path(target)
     where = f"cannot write {what} to {target}"
@@ -97,7 +97,7 @@ def claim_folder(target: str | os.PathLike, what: str, *, inputs: Iterable = (),
     """Make ``target`` a folder femstudy adds files to over several runs (a sweep, which
     resumes): absent or empty (then marked as femstudy's), or already marked; anything else is
     refused as by :func:`check_output_folder`. Returns the folder."""
-    from femstudy.atomic import MARKER
+    from femstudy.marker import MARKER
 
     target = Path(target)
     if (target / MARKER).is_file():

@@ -29,12 +29,10 @@ import numpy as np
 from femstudy.errors import UserError, require
 from femstudy.meshing import bone_ends
 from femstudy.meshing.surface import surface_samples
+from femstudy.meshing.units import UNIT_RANGES, UNIT_SCALE
 
 log = logging.getLogger(__name__)
 
-UNIT_SCALE = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
-#: Plausible femur lengths in each unit (an adult femur is 250-700 mm).
-UNIT_RANGES = {"m": (0.2, 0.75), "in": (8.0, 24.0), "cm": (24.5, 75.0), "mm": (200.0, 750.0)}
 #: Smallest |condyle offset − shaft bow| that tells anterior from posterior, as a fraction of
 #: the length (the built-in femur: 0.031; nine real femurs: 0.055-0.075, docs/meshing.md).
 ANTERIOR_MIN_SCORE = 0.01

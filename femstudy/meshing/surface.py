@@ -287,7 +287,7 @@ def read_points(path: str | Path):
     :data:`MAX_TRIANGLES`, and then the points: finite, and spanning what a femur spans in
     mm, cm, m or inches (a file scaled by 1e30 is refused here, not handed to VTK's filters).
     """
-    from femstudy.meshing.frame import UNIT_RANGES
+    from femstudy.meshing.units import UNIT_RANGES
 
     path = Path(path)
     check_surface_file(path)
