@@ -96,11 +96,11 @@ def main() -> None:
         folder = args.work / f"femur-femstudy-{float(size):g}mm"
         ours, theirs = [], []
         for _ in range(args.repeats):
-            wall, out = run([sys.executable, __file__, "--phases", "model.npz", "/tmp/profile-u.npz"], folder)
+            wall, out = run([sys.executable, __file__, "--phases", "model.npz", "profile-u.npz"], folder)
             ours.append((wall, json.loads(out.strip().splitlines()[-1])))
             wall, _ = run(["/usr/bin/python3", str(REPO / "bench/peers/dolfinx_static.py"), "case.npz",
-                           "/tmp/profile-dx.npz", "--solver", "mumps"], folder)
-            with np.load("/tmp/profile-dx.npz") as d:
+                           "profile-dx.npz", "--solver", "mumps"], folder)
+            with np.load(folder / "profile-dx.npz") as d:
                 times = {k: float(d[k]) for k in ("t_read", "t_setup", "t_assemble", "t_factor", "t_solve")}
             theirs.append((wall, times))
         print(f"\n{size} mm: femstudy (wall / CPU s, medians of {args.repeats})\n")
