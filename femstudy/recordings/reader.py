@@ -181,7 +181,7 @@ def daq_time(rec: Recording) -> Recording:
 
     Anything else (a large backward jump) is left for :func:`check_recording` to refuse."""
     t = np.asarray(rec.time_s, dtype=np.float64)
-    if t.size < 3:
+    if t.size < 3 or not np.all(np.isfinite(t)):  # non-finite stamps are check_recording's to refuse
         return rec
     arrays = {k: getattr(rec, k) for k in ("thrust_N", "torque_Nmm", "depth_mm", "fx_N", "fy_N")}
     notes = list(rec.notes)
