@@ -35,6 +35,7 @@ from femstudy.errors import UserError, require
 from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
 from femstudy.hole.frame import HoleFrame
 from femstudy.meshing.landmarks import boundary_faces, region_interface
+from femstudy.meshing.site_surface import ray_hits
 
 #: Rays per batch in the ray casts (bounds the (rays × triangles) temporaries).
 RAY_BATCH = 64
@@ -46,24 +47,25 @@ INTERFACE_BAND_MM = 1.5
 INTERFACE_COVER = 0.9
 
 
-def _crossings(origins: np.ndarray, direction: np.ndarray, tri: np.ndarray) -> np.ndarray:
-    """(rays, triangles) distances along ``direction`` from each origin to each triangle (inf: missed)."""
-    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    p = np.cross(direction, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    ok = np.abs(det) > 1e-14 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = origins[:, None, :] - tri[None, :, 0]
-    u = np.einsum("rtj,tj->rt", s, p) * inv
-    q = np.cross(s, e1[None])
-    v = (q @ direction) * inv
-    t = np.einsum("tj,rtj->rt", e2, q) * inv
-    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1)
-    return np.where(hit, t, np.inf)
+class _OuterColumns:
+    """What every column source derives from its ``outer_depth``: which columns meet the bone,
+    and their tops, refused when one misses the bone."""
+
+    def covers(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) True where a column meets the bone's outer surface."""
+        return np.isfinite(self.outer_depth(xy))
+
+    def top(self, xy: np.ndarray) -> np.ndarray:
+        """(n,) depth ζ of the outer surface on every column [mm]."""
+        first = self.outer_depth(xy)
+        if not np.all(np.isfinite(first)):
+            raise UserError(f"{np.sum(~np.isfinite(first))} columns of the local model miss the bone's outer surface: "
+                            "the submodel radius reaches beyond the bone")
+        return first
 
 
 @dataclass(frozen=True)
-class FemurColumns:
+class FemurColumns(_OuterColumns):
     """Callables for :func:`femstudy.hole.mesh.hole_mesh` on one global mesh and frame."""
 
     mesh: TetMesh
@@ -92,21 +94,9 @@ class FemurColumns:
     def outer_depth(self, xy: np.ndarray) -> np.ndarray:
         """(n,) depth ζ of the outer surface on every column [mm], inf where a column misses it."""
         origins, tri, lift = self._rays(xy, self.outer)
-        first = np.concatenate([_crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri).min(axis=1)
+        first = np.concatenate([ray_hits(origins[i:i + RAY_BATCH], self.frame.axis, tri).min(axis=1)
                                 for i in range(0, len(origins), RAY_BATCH)]) if len(tri) else np.full(len(origins), np.inf)
         return first - lift
-
-    def covers(self, xy: np.ndarray) -> np.ndarray:
-        """(n,) True where a column meets the bone's outer surface."""
-        return np.isfinite(self.outer_depth(xy))
-
-    def top(self, xy: np.ndarray) -> np.ndarray:
-        """(n,) depth ζ of the outer surface on every column [mm]."""
-        first = self.outer_depth(xy)
-        if not np.all(np.isfinite(first)):
-            raise UserError(f"{np.sum(~np.isfinite(first))} columns of the local model miss the bone's outer surface: "
-                            "the submodel radius reaches beyond the bone")
-        return first
 
     def _first_below(self, xy: np.ndarray, faces: np.ndarray, top: np.ndarray) -> np.ndarray:
         """(n,) depth of the first crossing of ``faces`` below ``top`` on every column [mm] (inf: none)."""
@@ -114,7 +104,7 @@ class FemurColumns:
         gap = 1e-6 * lift
         found = []
         for i in range(0, len(origins), RAY_BATCH):
-            t = _crossings(origins[i:i + RAY_BATCH], self.frame.axis, tri) - lift
+            t = ray_hits(origins[i:i + RAY_BATCH], self.frame.axis, tri) - lift
             found.append(np.where(t > top[i:i + RAY_BATCH, None] + gap, t, np.inf).min(axis=1, initial=np.inf))
         return np.concatenate(found) if found else np.full(len(xy), np.inf)
 
@@ -191,7 +181,7 @@ CANAL_PROBE_MM = 2.0
 
 
 @dataclass(frozen=True)
-class SurfaceColumns:
+class SurfaceColumns(_OuterColumns):
     """Column tops, cortex and bottoms of a local hole model from the site's surfaces (module
     docstring); the global mesh (``mesh_columns``) decides only between canal and cancellous
     bone below the cortex and gives the bottoms in cancellous bone."""
@@ -216,16 +206,6 @@ class SurfaceColumns:
         xy = np.atleast_2d(np.asarray(xy, float))
         origins = self.frame.to_global(np.column_stack([xy, np.full(len(xy), -self.lift)]))
         return self.surface.entry(origins, self.frame.axis) - self.lift
-
-    def covers(self, xy: np.ndarray) -> np.ndarray:
-        return np.isfinite(self.outer_depth(xy))
-
-    def top(self, xy: np.ndarray) -> np.ndarray:
-        first = self.outer_depth(xy)
-        if not np.all(np.isfinite(first)):
-            raise UserError(f"{np.sum(~np.isfinite(first))} columns of the local model miss the bone's outer surface: "
-                            "the submodel radius reaches beyond the bone")
-        return first
 
     def inner_depth(self, xy: np.ndarray, top: np.ndarray) -> np.ndarray:
         """(n,) ζ of the inner cortical surface by the cortex rule (splined over the disk) [mm]."""
