@@ -164,3 +164,18 @@ def test_boundary_points_straddle_a_material_interface():
     assert np.all(gap[at_interface & (label == CANCELLOUS_DISTAL)] > -0.005)
     sample_local = station.hole.frame.to_local(samples.points[locator.label(samples.points) >= 0])
     assert np.abs(sample_local[:, 2] - inner_cortex(sample_local[:, :2])).min() > samples.spacing_mm / 2 ** 10
+
+
+def test_points_just_inside_any_element_are_found_in_it(p2):
+    """A point 1e-5 (barycentric) inside one face of each element lies in that element and no
+    other: the locator finds it there, however far the element's centroid is from the point."""
+    station, system = p2
+    rng = np.random.default_rng(3)
+    n = system.n_tets
+    weights = np.column_stack([np.full(n, 1e-5), rng.dirichlet(np.ones(3), n) * (1 - 1e-5)])
+    first = rng.integers(0, 4, n)  # the vertex opposite the face the point is near
+    corners = system.mesh.p.T[system.mesh.t.T]  # (n, 4, 3)
+    turned = corners[np.arange(n)[:, None], (np.arange(4)[None] + first[:, None]) % 4]
+    points = np.einsum("nk,nkj->nj", weights, turned)
+    found = point_probe(system, points).element
+    assert (found == np.arange(n)).all(), f"{np.sum(found != np.arange(n))} of {n} points placed elsewhere"

@@ -2,8 +2,8 @@
 
 Each point is located in a tetrahedron of the system's mesh (:class:`MeshLocator`: VTK's cell
 locator through pyvista, checked, and where it misses by round-off on a shared face or the
-boundary, the element among the 64 with the nearest centroids in which the point's smallest
-barycentric coordinate is largest); a point counts as inside when that coordinate is ≥ −1e-9. With ξ the point's
+boundary, the element among the 64 with the nearest centroids and those sharing a vertex with
+VTK's in which the point's smallest barycentric coordinate is largest); a point counts as inside when that coordinate is ≥ −1e-9. With ξ the point's
 reference coordinates in that element, the displacement is u(x) = Σ_a N_a(ξ) u_a and the
 stress σ(x) = D B(ξ) u_e [MPa] — the element's own stress field evaluated at the point
 (discontinuous across elements; on a shared face one of the elements is used). Both are
@@ -89,7 +89,8 @@ class MeshLocator:
     VTK's static cell locator (through pyvista) answers first (containing cell, else closest
     cell); a point it places just outside its cell (between the tolerance and
     :data:`RETRY_WINDOW`: it happens on shared faces) is tried in the 64 elements with the
-    nearest centroids.
+    nearest centroids and in those sharing a vertex with VTK's cell (an element with long
+    edges can hold a point while its centroid is farther than 64 others).
     """
 
     def __init__(self, system):
@@ -98,6 +99,7 @@ class MeshLocator:
         self.system = system
         self._grid = pv.UnstructuredGrid({pv.CellType.TETRA: system.mesh.t.T}, system.mesh.p.T)
         self._centroids = None
+        self._vertex_elements = None
         self._inverse = jacobians(system.mesh.p.T, system.mesh.t.T)[0]  # J⁻¹ of every element, for all queries
 
     def locate(self, points: np.ndarray, search_missed: bool = True):
@@ -122,14 +124,30 @@ class MeshLocator:
             if self._centroids is None:
                 self._centroids = cKDTree(mesh.p[:, mesh.t].mean(axis=1).T)
             k = min(64, mesh.nelements)
-            _, near = self._centroids.query(points[retry], k)
-            near = near.reshape(len(retry), k)
-            tries = self._coordinates(near.ravel(), np.repeat(points[retry], k, axis=0))[2]
-            best = np.argmax(tries.reshape(len(retry), k), axis=1)
+            near = np.hstack([self._centroids.query(points[retry], k)[1].reshape(len(retry), k),
+                              self._sharing_a_vertex(element[retry])])
+            tries = self._coordinates(np.maximum(near, 0).ravel(), np.repeat(points[retry], near.shape[1], axis=0))[2]
+            tries = np.where(near.ravel() >= 0, tries, -np.inf)
+            best = np.argmax(tries.reshape(near.shape), axis=1)
             element[retry] = near[np.arange(len(retry)), best]
             xi[retry], invJ[retry], worst[retry] = self._coordinates(element[retry], points[retry])
         element[worst < -BOUNDARY_TOLERANCE] = -1
         return element, xi, invJ
+
+    def _sharing_a_vertex(self, element: np.ndarray) -> np.ndarray:
+        """(n, m) the elements sharing a vertex with each element (rows padded with −1)."""
+        mesh = self.system.mesh
+        if self._vertex_elements is None:
+            vertex = mesh.t.T.ravel()
+            order = np.argsort(vertex, kind="stable")
+            self._vertex_elements = (np.searchsorted(vertex[order], np.arange(mesh.p.shape[1] + 1)),
+                                     np.repeat(np.arange(mesh.nelements), 4)[order])
+        start, owners = self._vertex_elements
+        found = [np.unique(np.concatenate([owners[start[v]:start[v + 1]] for v in mesh.t[:, e]])) for e in element]
+        out = np.full((len(found), max(map(len, found))), -1, dtype=np.int64)
+        for row, elements in enumerate(found):
+            out[row, :len(elements)] = elements
+        return out
 
     def _coordinates(self, element: np.ndarray, points: np.ndarray):
         return _reference_coordinates(self.system, element, points, self._inverse)
