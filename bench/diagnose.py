@@ -35,7 +35,7 @@ from femstudy.diagnosis import inputs  # noqa: E402
 from femstudy.diagnosis.baseline import TraceSimulation  # noqa: E402
 from femstudy.diagnosis.cases import CLASSES, make_case  # noqa: E402
 from femstudy.diagnosis.diagnose import diagnose  # noqa: E402
-from femstudy.diagnosis.mechanisms import MECHANISMS  # noqa: E402
+from femstudy.diagnosis import MECHANISMS  # noqa: E402
 from femstudy.drilling.friction import load_bone_set  # noqa: E402
 
 BONE = load_bone_set("bovine")

@@ -57,7 +57,7 @@ import numpy as np
 from scipy import signal
 
 from femstudy.diagnosis.locate import mismatch_intervals
-from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.mechanisms.problem import Problem
 
 #: Least BIC gain (Δχ² − k ln n) for a shape to be reported.
 MIN_GAIN = 10.0
@@ -140,8 +140,8 @@ def modelled_loads(problem: Problem, params: dict, t: np.ndarray | None = None) 
     out = []
     for c in problem.channels:
         load = terms[c] * params.get(f"{c}_scale", 1.0)
-        if c == "torque_Nmm" and "clog" in terms and "torque_gain_Nmm_per_N" in params:
-            load = load + params["torque_gain_Nmm_per_N"] * params.get("thrust_N_scale", 1.0) * terms["clog"]
+        if c == "torque_Nmm" and terms["excess"]:
+            load = load + problem.torque_of_excess(params, terms)
         out.append(load)
     return t, out
 
