@@ -1,12 +1,12 @@
 """``femstudy diagnose`` on concealed synthetic cases: the right mechanisms, the right sizes, silence
-when nothing is missing (one fixed-seed case per class of femstudy.diagnosis.cases)."""
+when nothing is missing (one fixed-seed case per class of tests/diagnosis_cases.py)."""
 
 import math
 
 import pytest
 
 from femstudy.diagnosis.baseline import TraceSimulation
-from femstudy.diagnosis.cases import CLASSES, make_case
+from diagnosis_cases import CLASSES, make_case
 from femstudy.diagnosis.diagnose import diagnose
 
 _cache = {}
