@@ -115,7 +115,7 @@ def run_femstudy(args: argparse.Namespace) -> None:
             seed = args.seed * 100_000 + k * 1000 + i
             case, d, seconds = run_case(kind, seed, torque=(i % 5 != 4), model=(i % 3 == 2))
             found = d.subset
-            fit = d.fit_summary["thrust_N"]
+            fit = d.to_json()["fit"]  # the thrust channel's scores
             rec = case.recording
             rows.append((case, found, fit, seconds, rec.duration_s, rec.sample_rate_hz, d))
             show = lambda s: "+".join(sorted(SHORT[m] for m in s)) or "-"
@@ -149,7 +149,7 @@ def run_femstudy(args: argparse.Namespace) -> None:
     for true_key, mech, key in RECOVERED:
         errors = []
         for case, found, fit, *_, d in rows:
-            reported = {m["mechanism"]: m["parameters"] for m in d.mechanisms}.get(mech, {})
+            reported = {m.mechanism: m.parameters for m in d.mechanisms}.get(mech, {})
             if true_key in case.true and key in reported and mech in case.truth:
                 if true_key == "mu_f" and case.recording.torque_Nmm is None:
                     continue  # without torque μ_f rests on the bone set's μ_w

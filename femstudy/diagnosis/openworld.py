@@ -57,6 +57,7 @@ from typing import Callable
 import numpy as np
 from scipy import signal
 
+from femstudy.diagnosis.findings import Unexplained
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.mechanisms.problem import Problem
 
@@ -516,35 +517,34 @@ def describe(problem: Problem, shape: Shape) -> tuple[str, str, str]:
 
 
 def report(problem: Problem, found: list[Shape], leftover: np.ndarray, spindle: dict | None,
-           span: tuple[float, float], peak_loads: np.ndarray) -> list[dict]:
-    """The contract's ``unexplained`` entries: described shapes, the spindle, and located
+           span: tuple[float, float], peak_loads: np.ndarray) -> tuple[Unexplained, ...]:
+    """The ``unexplained`` findings: described shapes, the spindle, and located
     residual the shapes leave that is larger than ``MIN_STRUCTURE`` of the peak load."""
     out = []
     if spindle is not None:
-        out.append({"start_s": round(span[0], 3), "end_s": round(span[1], 3), "channel": "both", "kind": "spindle",
-                    "description": (f"the spindle turns slower than stated while cutting: its ripple line is at "
-                                    f"{spindle['line_hz']:.2f} Hz, {100 * spindle['speed_drop']:.0f} % below "
-                                    f"N/60 = {spindle['stated_hz']:.2f} Hz, so the feed per revolution and the "
-                                    f"loads are higher (a spindle slowing under load, or a wrong spindle_rpm)."),
-                    "evidence": spindle})
+        out.append(Unexplained(round(span[0], 3), round(span[1], 3), "both", "spindle",
+                               f"the spindle turns slower than stated while cutting: its ripple line is at "
+                               f"{spindle['line_hz']:.2f} Hz, {100 * spindle['speed_drop']:.0f} % below "
+                               f"N/60 = {spindle['stated_hz']:.2f} Hz, so the feed per revolution and the "
+                               f"loads are higher (a spindle slowing under load, or a wrong spindle_rpm).",
+                               spindle))
     for s in found:
         kind, channel, text = describe(problem, s)
-        out.append({"start_s": round(float(s.interval[0]), 3), "end_s": round(float(s.interval[1]), 3),
-                    "channel": channel, "kind": kind, "description": text,
-                    "evidence": {"delta_bic": round(s.gain, 1), "size": round(s.size, 4),
-                                 **{k: round(v, 4) for k, v in s.parameters.items()}}})
+        out.append(Unexplained(round(float(s.interval[0]), 3), round(float(s.interval[1]), 3), channel, kind, text,
+                               {"delta_bic": round(s.gain, 1), "size": round(s.size, 4),
+                                **{k: round(v, 4) for k, v in s.parameters.items()}}))
     z = leftover / problem.sigma
     for c, name in enumerate(problem.channels):
         big = np.abs(leftover[c]) >= MIN_STRUCTURE * peak_loads[c]
         for interval in mismatch_intervals(problem.band.t_dec, np.where(big, z[c], 0.0), problem.n_eff_factor, name,
                                            chi2_of=lambda lo, hi, c=c: interval_chi2(problem, c, leftover[c], lo, hi)):
-            out.append({"start_s": round(interval["start_s"], 3), "end_s": round(interval["end_s"], 3),
-                        "channel": name, "kind": "structure",
-                        "description": f"residual structure in the {NAME[name]} that none of the shapes describes "
-                                       f"(up to {100 * float(np.max(np.abs(leftover[c][(problem.band.t_dec >= interval['start_s']) & (problem.band.t_dec <= interval['end_s'])]))) / peak_loads[c]:.0f} % "
-                                       f"of the peak load, max |z| = {interval['max_abs_z']:.1f})",
-                        "evidence": {"significance": interval["significance"]}})
-    return sorted(out, key=lambda u: (u["start_s"], u["channel"]))
+            inside = (problem.band.t_dec >= interval["start_s"]) & (problem.band.t_dec <= interval["end_s"])
+            share = 100 * float(np.max(np.abs(leftover[c][inside]))) / peak_loads[c]
+            out.append(Unexplained(round(interval["start_s"], 3), round(interval["end_s"], 3), name, "structure",
+                                   f"residual structure in the {NAME[name]} that none of the shapes describes "
+                                   f"(up to {share:.0f} % of the peak load, max |z| = {interval['max_abs_z']:.1f})",
+                                   {"significance": interval["significance"]}))
+    return tuple(sorted(out, key=lambda u: (u.start_s, u.channel)))
 
 
 def interval_chi2(problem: Problem, c: int, r: np.ndarray, lo: int, hi: int) -> float:
