@@ -27,7 +27,7 @@ from scipy import optimize, signal
 from scipy.linalg import lapack
 
 from femstudy.diagnosis.mechanisms.problem import Problem
-from femstudy.diagnosis.mechanisms.registry import catalogue, mechanism, nonnegative_linear, owner
+from femstudy.diagnosis.mechanisms.registry import catalogue, nonnegative_linear, owner
 
 #: Time constants of the stand-ins scanned [s], and the one used while another scan runs.
 TAU_GRID_S = np.geomspace(0.2, 40.0, 16)

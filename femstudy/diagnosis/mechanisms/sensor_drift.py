@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from femstudy.diagnosis.mechanisms.problem import Problem
