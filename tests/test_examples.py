@@ -72,7 +72,7 @@ def test_diagnose_recording_example(tmp_path, capsys):
     assert isinstance(d, femstudy.Diagnosis)
     with pytest.raises(dataclasses.FrozenInstanceError):
         d.seconds = 0.0
-    assert {m["mechanism"] for m in d.mechanisms} == {"chip_clogging", "feed_pulsation", "sensor_drift"}
+    assert {m.mechanism for m in d.mechanisms} == {"chip_clogging", "feed_pulsation", "sensor_drift"}
     js = json.loads((tmp_path / "d.json").read_text())
     assert js["fit"]["improved"]["r2_heldout"] > js["fit"]["baseline"]["r2_heldout"]
     assert "held out" in capsys.readouterr().out

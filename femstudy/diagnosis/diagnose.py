@@ -30,14 +30,16 @@ from pathlib import Path
 
 import numpy as np
 
-from femstudy.diagnosis import explain, heldout, inputs, openworld
+from femstudy.diagnosis import explain, heldout, inputs, openworld, report
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
+from femstudy.diagnosis.findings import ChannelFit, MismatchInterval, Scores, Timing, TraceEventTimes
 from femstudy.diagnosis.fit import Fit, fit_all, fit_each, seeds
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.mechanisms import Problem
 from femstudy.diagnosis.prepare import align, build_problem, cut_window, restate, with_noise
+from femstudy.diagnosis.result import DiagnosisResult
 from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection, select
-from femstudy.diagnosis.verdict import Verdict, decide
+from femstudy.diagnosis.verdict import decide
 from femstudy.diagnosis.workers import fitter
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
@@ -47,54 +49,16 @@ logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class Diagnosis:
-    """The result of :func:`diagnose`: everything ``femstudy diagnose`` reports.
+class Diagnosis(DiagnosisResult):
+    """The result of :func:`diagnose`: everything ``femstudy diagnose`` reports (the fields are
+    :class:`.result.DiagnosisResult`'s).
 
     :meth:`to_json` is the JSON contract (docs/diagnosis.md), :meth:`summary` the printed
-    text and :meth:`write` the files. Times are on the recording's clock [s], loads in N and N·mm.
-
-    Attributes
-    ----------
-    recording : the recording diagnosed (:class:`~femstudy.recordings.Recording`).
-    problem : the fitted problem: analysis band, channels, noise model, aligned simulation.
-    baseline : the simulation as given, aligned (clock shift, tares): the "before" fit.
-    fits : every fitted subset of the catalogue, by frozenset of mechanism names.
-    selection : the model selection (BIC table, inclusion probabilities, what was dropped).
-    verdict : the named subset, its fit, the shapes left unexplained, the confidences.
-    mismatch : intervals where the aligned simulation departs from the recording beyond noise
-        (dicts: start_s, end_s, channel, significance, max_abs_z).
-    mechanisms : the named mechanisms (dicts: mechanism, confidence, parameters,
-        explanation, evidence).
-    unexplained : what the best catalogue model leaves, characterised (dicts: start_s, end_s,
-        channel, kind, description, evidence).
-    fit_summary : per channel, R² (in sample and held out) and RMSE before and after.
-    noise_models : per channel, the fitted :class:`~femstudy.diagnosis.noise.NoiseSpectrum`.
-    timing : the simulation's events on the recording's clock, and the cortex [mm].
-    simulation_label : what the recording was compared with.
-    seconds : wall-clock time of the diagnosis [s].
-    notes : how inputs were read or estimated (one sentence each).
+    text and :meth:`write` the files.
     """
-
-    recording: Recording
-    problem: Problem
-    baseline: Fit
-    fits: dict
-    selection: Selection
-    verdict: Verdict
-    mismatch: list
-    mechanisms: list
-    unexplained: list
-    fit_summary: dict
-    noise_models: dict
-    timing: dict
-    simulation_label: str
-    seconds: float
-    notes: tuple = ()
 
     def summary(self) -> str:
         """The printed summary (inputs, noise, timing, mechanisms, unexplained, fit, residual test)."""
-        from femstudy.diagnosis import report
-
         return report.summary_text(self)
 
     def write(self, json_path=None, plot_path=None, report_dir=None) -> list[Path]:
@@ -106,8 +70,6 @@ class Diagnosis:
         >>> d.write(json_path="d.json", report_dir="report")  # doctest: +SKIP
         [PosixPath('d.json'), PosixPath('report/report.md')]
         """
-        from femstudy.diagnosis import report
-
         written = []
         if json_path is not None:
             report.write_json(json_path, self)
@@ -120,45 +82,8 @@ class Diagnosis:
             written.append(Path(report_dir) / "report.md")
         return written
 
-    @property
-    def improved(self) -> Fit:
-        return self.verdict.fit
 
-    @property
-    def subset(self) -> frozenset:
-        """The named mechanisms."""
-        return self.verdict.subset
-
-    def to_json(self) -> dict:
-        """The JSON contract, with per-channel, noise and selection detail added."""
-        thrust = self.fit_summary["thrust_N"]
-        units = {"thrust_N": "N", "torque_Nmm": "N·mm"}
-        return {
-            "mismatch": self.mismatch,
-            "missing_physics": self.mechanisms,
-            "unexplained": self.unexplained,
-            "fit": {"baseline": thrust["baseline"], "improved": thrust["improved"],
-                    "window_s": thrust["window_s"],
-                    "channels": {c: {k: v for k, v in s.items() if k != "window_s"}
-                                 for c, s in self.fit_summary.items()}},
-            "alignment": explain.alignment(self.problem, self.baseline),
-            "calibration": explain.calibration(self.problem, self.improved),
-            "timing": self.timing,
-            "noise": {c: float(s) for c, s in zip(self.problem.channels, self.problem.sigma_raw)},
-            "noise_model": {c: m.to_json(units[c], self.problem.band.sigma_s) for c, m in self.noise_models.items()},
-            "residual_check": {"chi2_per_dof": round(self.verdict.chi2_per_dof, 3),
-                               "p_value": self.verdict.residual_p_value,
-                               "consistent_with_noise": bool(self.verdict.consistent_with_noise)},
-            "selection": {"bic": {"+".join(sorted(s)) or "none": round(b, 2)
-                                  for s, b in sorted(self.selection.bic.items(), key=lambda kv: kv[1])},
-                          "not_selected": {**self.selection.dropped, **self.verdict.dropped},
-                          "inclusion_probability": {m: round(c, 4) for m, c in self.selection.confidence.items()}},
-            "seconds": round(self.seconds, 3),
-            "notes": list(self.notes),
-        }
-
-
-def summarise_fit(problem: Problem, baseline: Fit, improved: Fit, fits_of=fit_each) -> dict:
+def summarise_fit(problem: Problem, baseline: Fit, improved: Fit, fits_of=fit_each) -> dict[str, ChannelFit]:
     """R² and RMSE of the smoothed recording over the cutting phase, per channel: in-sample
     (``r2``) and held out (``r2_heldout``, blocked folds, :mod:`.heldout`)."""
     window = cut_window(problem, baseline)
@@ -173,10 +98,10 @@ def summarise_fit(problem: Problem, baseline: Fit, improved: Fit, fits_of=fit_ea
         scores = {}
         for label, fit in (("baseline", baseline), ("improved", improved)):
             r = y - fit.model[c, window]
-            scores[label] = {"r2": round(heldout.r2(y, fit.model[c, window]), 4),
-                             "r2_heldout": round(heldout.r2(y, predictions[label][c, window]), 4),
-                             "rmse": round(float(np.sqrt(np.mean(r ** 2))), 4)}
-        out[name] = {**scores, "window_s": [round(float(t[0]), 3), round(float(t[-1]), 3)]}
+            scores[label] = Scores(round(heldout.r2(y, fit.model[c, window]), 4),
+                                   round(heldout.r2(y, predictions[label][c, window]), 4),
+                                   round(float(np.sqrt(np.mean(r ** 2))), 4))
+        out[name] = ChannelFit(scores["baseline"], scores["improved"], (round(float(t[0]), 3), round(float(t[-1]), 3)))
     return out
 
 
@@ -238,18 +163,18 @@ def _simulation(recording: Recording, simulation, model: str | None, cortex_mm: 
     return sim, cortex, label, notes
 
 
-def _timing(problem: Problem, baseline: Fit, cortex_mm: float) -> dict:
+def _timing(problem: Problem, baseline: Fit, cortex_mm: float) -> Timing:
     sim = problem.simulation
     shift = baseline.params["shift_s"]
     events = getattr(sim, "events", None)
     if events is not None:
-        out = events.to_json(shift)
-        out["cortex_source"] = "the simulation's breakthrough" if events.cortex_mm is not None else "depth reached"
-    else:
-        out = {"contact_s": round(sim.contact_s + shift, 4), "feed_stop_s": round(sim.stop_s + shift, 4)
-               if math.isfinite(sim.stop_s) else None}
-    out["cortex_mm"] = round(cortex_mm, 3)
-    return out
+        on_clock = events.to_json(shift)
+        source = "the simulation's breakthrough" if events.cortex_mm is not None else "depth reached"
+        return Timing(on_clock["contact_s"], on_clock["feed_stop_s"], round(cortex_mm, 3),
+                      TraceEventTimes(on_clock["full_engagement_s"], on_clock["breakthrough_s"],
+                                      on_clock["depth_reached_mm"], source))
+    return Timing(round(sim.contact_s + shift, 4), round(sim.stop_s + shift, 4) if math.isfinite(sim.stop_s) else None,
+                  round(cortex_mm, 3))
 
 
 def diagnose(recording, simulation=None, cortex_mm: float | None = None,
@@ -307,11 +232,11 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
     say(f"{problem.band.t_dec.size} smoothed samples per channel ({', '.join(problem.channels)}); noise "
         + ", ".join(f"{c} alpha {m.exponent:.2f}, corner {m.corner_hz:.3g} Hz" for c, m in noise_models.items()))
     residual = problem.y - baseline.model
-    mismatch = sorted((interval for c, name in enumerate(problem.channels)
+    mismatch = sorted((MismatchInterval(**interval) for c, name in enumerate(problem.channels)
                        for interval in mismatch_intervals(
                            problem.band.t_dec, residual[c] / problem.sigma[c], problem.n_eff_factor, name,
                            chi2_of=lambda lo, hi, c=c: openworld.interval_chi2(problem, c, residual[c], lo, hi))),
-                      key=lambda i: (i["start_s"], i["channel"]))
+                      key=lambda i: (i.start_s, i.channel))
     say(f"aligned (shift {baseline.params['shift_s'] * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s)")
     with fitter(workers) as fits_of:
         start_params = {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())}
@@ -343,5 +268,5 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
         summary = summarise_fit(problem, baseline, improved, fits_of)
     seconds = time.perf_counter() - start
     say(f"diagnosed in {seconds:.2f} s")
-    return Diagnosis(recording, problem, baseline, fits, selection, verdict, mismatch, mechanisms, unexplained,
+    return Diagnosis(recording, problem, baseline, fits, selection, verdict, tuple(mismatch), mechanisms, unexplained,
                      summary, noise_models, _timing(problem, baseline, cortex), label, seconds, tuple(notes))

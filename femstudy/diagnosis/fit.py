@@ -6,13 +6,15 @@ reflective); for each θ the linear ones (tares, drift rates, clogging torque ga
 scales) are the weighted linear least-squares solution (variable projection, :func:`project`).
 Residuals are weighted by the noise of each smoothed sample, so the cost is χ²/2.
 
-Starting points: the pulsation frequency is multimodal, so a scan over frequencies (0.15–3.5
-Hz) fits the exact linearisation of the pulsation term in (a, b) — load modulation plus depth
-lead — together with linear stand-ins for the other mechanisms, one small linear solve per
-frequency; its best local minima of χ² start separate fits. Softening's time constant is seeded by a
-scan of the same kind. Each subset is also started from the best fit of its subsets with one
-mechanism fewer; the best optimum is kept. The pulse-shaped and swept pulsations are fitted
-only where the sine leaves more than noise (:func:`fit_all`).
+Starting points (:func:`seeds`, :class:`Linearisation`): a mechanism with a multimodal
+parameter scans it (the pulsation's frequency, 0.15–3.5 Hz: the exact linearisation of the
+pulsation term in (a, b), load modulation plus depth lead), each candidate fitted together
+with the other mechanisms' linear stand-ins, one small linear solve per candidate; its best
+local minima of χ² start separate fits. The stand-ins' time constant (softening's) is scanned
+the same way, with the best scanned candidate as a shared term. Each mechanism reads its seeds
+from these fits. Each subset is also started from the best fit of its subsets with one
+mechanism fewer; the best optimum is kept. A mechanism's optional forms (the pulse-shaped and
+swept pulsations) are fitted only where the plain one leaves more than noise (:func:`fit_all`).
 """
 
 from __future__ import annotations
@@ -24,11 +26,13 @@ import numpy as np
 from scipy import optimize, signal
 from scipy.linalg import lapack
 
-from femstudy.diagnosis.mechanisms import MECHANISMS, Problem
+from femstudy.diagnosis.mechanisms.problem import Problem
+from femstudy.diagnosis.mechanisms.registry import catalogue, nonnegative_linear, owner
 
-FREQUENCY_GRID_HZ = np.geomspace(0.15, 3.5, 240)
+#: Time constants of the stand-ins scanned [s], and the one used while another scan runs.
 TAU_GRID_S = np.geomspace(0.2, 40.0, 16)
-NOMINAL_GROWTH = 0.5
+STAND_IN_TAU_S = 2.0
+#: Best local minima of a mechanism's scan that start fits.
 FREQUENCY_STARTS = 3
 #: χ²/dof of the all-mechanism fit above which the pulse-shaped pulsation is tried.
 PULSE_GATE = 2.0
@@ -53,15 +57,10 @@ class Fit:
     def chi2_total(self) -> float:
         return float(self.chi2.sum())
 
-    @property
-    def pulse(self) -> bool:
-        """The pulsation is pulse-shaped (its sharpness fitted)."""
-        return "pulsation_sharpness" in self.variant
-
 
 def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Least squares for a few columns (tare, drift ramp, clogging torque): normal equations,
-    or the SVD when a column is (nearly) zero, e.g. the clogging column at p = 0."""
+    """Least squares for a few columns (tare, drift ramp, torque gain): normal equations, or the
+    SVD when a column is (nearly) zero, e.g. the clogging column at p = 0."""
     G = A.T @ A
     d = np.diag(G)
     if d.min() > 1e-10 * d.max():
@@ -73,21 +72,27 @@ def _lstsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def project(problem: Problem, subset: frozenset, params: dict, rows: np.ndarray | None = None):
     """Whitened residuals on ``rows`` (default all) per channel, the linear parameters fitted
-    there, and the smoothed model at all instants, for the nonlinear ``params``."""
+    there, and the smoothed model at all instants, for the nonlinear ``params``. A torque gain
+    (k_T = R μ_w l_w / M) is at least 0: fitted negative, it is held at 0."""
     parts = problem.design(subset, params)
     names = problem.linear_names(subset)
+    gains = nonnegative_linear()
     residuals, linear, model = [], {}, []
     for c, (base, A) in enumerate(parts):
         target = problem.whiten(c, problem.y[c] - base, rows)
         Aw = problem.whiten(c, A, rows)
         beta = _lstsq(Aw, target)
-        if names[c][-1] == "torque_gain_Nmm_per_N" and beta[-1] < 0:  # k_T = R μ_w l_w / M ≥ 0
-            beta = np.append(_lstsq(Aw[:, :-1], target), 0.0)
+        negative = [j for j, n in enumerate(names[c]) if n in gains and beta[j] < 0]
+        if negative:
+            kept = np.delete(np.arange(Aw.shape[1]), negative)
+            trailing = kept[-1] == kept.size - 1  # the gains come last: a slice of the columns
+            beta = np.insert(_lstsq(Aw[:, :kept.size] if trailing else Aw[:, kept], target),
+                             np.array(negative) - np.arange(len(negative)), 0.0)
         linear.update(zip(names[c], beta))
         residuals.append(target - Aw @ beta)
         model.append(base + A @ beta)
-    if "torque_gain_Nmm_per_N" in linear:  # per newton of recorded extra thrust, g_F·C
-        linear["torque_gain_Nmm_per_N"] /= linear.get("thrust_N_scale", 1.0) or 1.0
+    for name in gains & linear.keys():  # per newton of recorded extra thrust, g_F·C
+        linear[name] /= linear.get("thrust_N_scale", 1.0) or 1.0
     return residuals, linear, np.vstack(model)
 
 
@@ -126,45 +131,18 @@ def fit_each(requests: list) -> list[Fit]:
     return [fit_subset(problem, subset, starts, **options) for problem, subset, starts, options in requests]
 
 
-def _pulsation_columns(problem: Problem, base_params: dict, freq: float) -> list[np.ndarray]:
-    """d(model)/da and d(model)/db at a = b = 0, per channel (smoothed): load scaling plus the
-    depth lead S'(τ)·δ."""
-    t = problem.band.t_model
-    sim = problem.simulation
-    shift = base_params["shift_s"]
-    t_contact = sim.contact_s + shift
-    tau = t - shift
-    w = 2 * math.pi * freq
-    sin, cos = np.sin(w * t), np.cos(w * t)
-    lead_a = (math.cos(w * t_contact) - cos) / w
-    lead_b = (sin - math.sin(w * t_contact)) / w
-    stop = (sim.contact_s + base_params["stop_depth_mm"] / problem.geometry.feed_mm_s
-            if sim.stop_is_parameter else sim.stop_s)
-    cutting = tau < stop
-    cols = []
-    F, T = sim.loads(tau, stop)
-    for load in ([F] + ([T] if problem.has_torque else [])):
-        slope = np.gradient(load, t)
-        col_a = np.where(cutting, load * sin + slope * lead_a, 0.0)
-        col_b = np.where(cutting, load * cos + slope * lead_b, 0.0)
-        cols.append(problem.band.smooth_model(np.vstack([col_a, col_b])))
-    return cols
-
-
 def _stand_in_columns(problem: Problem, base_params: dict, tau_s: float) -> list[np.ndarray]:
-    """Linear stand-ins per channel: the alignment's columns (scale, tare), a drift ramp,
-    clogging at p = 0.5 and softening at τ_s."""
-    terms = problem.terms({**base_params, "growth_exponent": NOMINAL_GROWTH})
+    """Linear stand-ins per channel: the alignment's columns (scale, tare), the mechanisms'
+    sensor columns (a drift ramp), then their stand-ins (clogging at its nominal growth,
+    softening at ``tau_s``), smoothed."""
     plain = problem.terms(base_params)
-    t = problem.band.t_model
-    t_contact = problem.simulation.contact_s + base_params["shift_s"]
-    soft = -np.expm1(-np.maximum(t - t_contact, 0.0) / tau_s)
+    stand_ins = [m.stand_in(problem, base_params, plain, tau_s) for m in catalogue() if m.stand_in is not None]
+    sensor = [term.column(problem) for m in catalogue() for term in m.linear]
     aligned = problem.design(frozenset(), base_params)
     cols = []
     for c, (_, A) in zip(problem.channels, aligned):
-        clog = terms["thrust_N"] - plain["thrust_N"] if c == "thrust_N" else terms.get("clog", 0 * t)
-        smooth = problem.band.smooth_model(np.vstack([clog, plain[c] * soft]))
-        cols.append(np.column_stack([A, problem.ramp, smooth[0], smooth[1]]))
+        smooth = problem.band.smooth_model(np.vstack([s[c] for s in stand_ins]))
+        cols.append(np.column_stack([A, *sensor, *smooth]))
     return cols
 
 
@@ -189,61 +167,74 @@ def _scan(problem: Problem, base_params: dict, shared_of, tau_s: float):
     return results
 
 
-def seeds(problem: Problem, base_params: dict) -> dict:
-    """Starting values from linearised scans: pulsation frequencies (best few), a, b; softening
-    time constant and fraction; growth exponent."""
-    def frequencies():
-        for f in FREQUENCY_GRID_HZ[FREQUENCY_GRID_HZ >= problem.lowest_pulsation_hz]:
-            cols = _pulsation_columns(problem, base_params, f)
-            yield f, [c.T for c in cols]
+@dataclass(frozen=True)
+class Linearisation:
+    """The linearised fits the seeds are read from: per scanning mechanism its best candidates
+    (key, χ², coefficients with its own columns first), the stand-ins' best time constant, and
+    each stand-in's thrust coefficient there (per unit of the calibration scale)."""
 
-    scan = _scan(problem, base_params, frequencies, tau_s=2.0)
-    chi2 = np.array([r[1] for r in scan])
-    peaks = signal.argrelmin(np.concatenate([[np.inf], chi2, [np.inf]]))[0] - 1
-    order = peaks[np.argsort(chi2[peaks])][:FREQUENCY_STARTS]
-    pulsations = []
-    for k in order:
-        f, _, coef = scan[k]
-        a, b = np.clip(coef[:2], -0.6, 0.6)
-        pulsations.append({"pulsation_frequency_hz": float(f), "pulsation_a": float(a), "pulsation_b": float(b)})
+    scans: dict
+    tau_s: float
+    stand_ins: dict
 
-    # softening time constant and growth exponent, with the best pulsation as a shared term
-    best_f = pulsations[0]["pulsation_frequency_hz"] if pulsations else 1.0
-    shared = [c.T for c in _pulsation_columns(problem, base_params, best_f)]
+
+def linearise(problem: Problem, base_params: dict) -> Linearisation:
+    """Each scanning mechanism's scan (best few local minima of χ²), then the stand-ins' time
+    constant with the best candidates as a shared term (see the module docstring)."""
+    scans, best = {}, []
+    for m in catalogue():
+        if m.scan is None:
+            continue
+
+        def candidates(m=m):
+            for key in m.scan.grid(problem):
+                yield key, [c.T for c in m.scan.columns(problem, base_params, key)]
+
+        scan = _scan(problem, base_params, candidates, tau_s=STAND_IN_TAU_S)
+        chi2 = np.array([r[1] for r in scan])
+        peaks = signal.argrelmin(np.concatenate([[np.inf], chi2, [np.inf]]))[0] - 1
+        scans[m.name] = [scan[k] for k in peaks[np.argsort(chi2[peaks])][:FREQUENCY_STARTS]]
+        key = scans[m.name][0][0] if scans[m.name] else m.scan.default
+        best.append([c.T for c in m.scan.columns(problem, base_params, key)])
+    if len(best) == 1:
+        shared = best[0]
+    else:  # several scanning mechanisms side by side, or none
+        shared = [np.hstack(cols) if cols else np.zeros((problem.band.t_dec.size, 0))
+                  for cols in (zip(*best) if best else [()] * len(problem.channels))]
     by_tau = []
     for tau_s in TAU_GRID_S:
         (_, value, coef), = _scan(problem, base_params, lambda: [(tau_s, shared)], tau_s=tau_s)
         by_tau.append((value, tau_s, coef))
     _, tau_s, coef = min(by_tau, key=lambda r: r[0])
+    width = shared[0].shape[1]
     n_aligned = len(problem.linear_names(frozenset())[0])
-    thrust_coef = coef[2:2 + n_aligned + 3]  # after the two shared pulsation columns
+    n_sensor = sum(len(m.linear) for m in catalogue())
+    with_stand_in = [m.name for m in catalogue() if m.stand_in is not None]
+    thrust_coef = coef[width:width + n_aligned + n_sensor + len(with_stand_in)]  # after the shared columns
     scale = thrust_coef[0] if problem.calibrate else 1.0
-    clog_coef, soft_coef = thrust_coef[-2] / scale, thrust_coef[-1] / scale
-    softening = {"softening_fraction": float(np.clip(-soft_coef, 0.02, 0.8)),
-                 "softening_log10_tau_s": float(math.log10(tau_s))}
-    g = problem.geometry
-    z_max = max(g.cortex_mm - g.cone_mm, 0.0) / g.diameter_mm
-    rise = max(clog_coef, 0.02) * math.expm1(NOMINAL_GROWTH * z_max) if z_max > 0 else 0.0
-    growth = float(np.clip(math.log1p(rise) / z_max if z_max > 0 else NOMINAL_GROWTH, 0.02, 4.0))
-    clogging = {"growth_exponent": growth, "clogging_onset_mm": 0.0, "clogging_retained": 0.5}
-    return {"pulsations": pulsations, "softening": softening, "clogging": clogging}
+    own = thrust_coef[len(thrust_coef) - len(with_stand_in):]
+    return Linearisation(scans, float(tau_s), {name: k / scale for name, k in zip(with_stand_in, own)})
+
+
+def seeds(problem: Problem, base_params: dict) -> dict:
+    """Starting values of each mechanism (name -> list of dicts, the first the default), read
+    from the linearised scans."""
+    linearisation = linearise(problem, base_params)
+    return {m.name: m.seeds(problem, linearisation) for m in catalogue()}
 
 
 def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: dict) -> list[dict]:
     """Starts for one subset: the seeds, and the best fit of a subset with one mechanism fewer
-    completed by the seeds. Pulsation alone is started at every candidate frequency; larger
-    subsets inherit the frequency through the smaller fits."""
+    completed by the seeds. A mechanism alone is started from each of its seeds (the
+    pulsation at every candidate frequency); larger subsets inherit them through the smaller
+    fits."""
     fixed = dict(base_params)
-    if "chip_clogging" in subset:
-        fixed.update(seed["clogging"])
-    if "thermal_softening" in subset:
-        fixed.update(seed["softening"])
-    pulsations = seed["pulsations"] or [{"pulsation_a": 0.1, "pulsation_b": 0.0, "pulsation_frequency_hz": 1.0}]
-    if "feed_pulsation" in subset:
-        fixed.update(pulsations[0])
+    for m in catalogue():
+        if m.name in subset:
+            fixed.update(seed[m.name][0])
     starts = [fixed]
-    if subset == {"feed_pulsation"}:
-        starts += [{**fixed, **p} for p in pulsations[1:]]
+    if len(subset) == 1:
+        starts += [{**fixed, **s} for s in seed[next(iter(subset))][1:]]
     previous = [smaller[subset - {m}] for m in subset if subset - {m} in smaller]
     if previous:
         best = min(previous, key=lambda f: f.chi2_total)
@@ -252,7 +243,8 @@ def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: d
 
 
 def _variant_stage(problem: Problem, fits: dict, name: str, starts: tuple, fits_of=fit_each) -> None:
-    """Refit the subsets with pulsation adding the optional parameter ``name``: first the best
+    """Refit the subsets with the mechanism of the optional parameter ``name`` (the pulsation's
+    sharpness or sweep) adding it: first the best
     one, from each value in ``starts``; if it gains more than the parameter's BIC cost plus
     ``MIN_PULSE_GAIN`` there, every other one from the value found, kept where it gains as much.
     A subset that would stay behind the best one's refit even gaining twice as much
@@ -260,7 +252,7 @@ def _variant_stage(problem: Problem, fits: dict, name: str, starts: tuple, fits_
     misfit scales the BIC, is always refitted)."""
     factor = problem.n_eff_factor
     cost = math.log(problem.y.size * factor) + MIN_PULSE_GAIN
-    pulsed = sorted((s for s in fits if "feed_pulsation" in s), key=lambda s: fits[s].chi2_total)
+    pulsed = sorted((s for s in fits if owner(name).name in s), key=lambda s: fits[s].chi2_total)
     full = max(fits, key=len)
     best = None
     for subset in pulsed:
@@ -285,10 +277,11 @@ def fit_all(problem: Problem, base_params: dict, seed: dict, fits_of=fit_each) -
     subsets of one size by ``fits_of``, :mod:`.workers`).
 
     When even the fit with all mechanisms leaves clearly more than noise (χ²/dof above
-    ``PULSE_GATE``), the pulsation's optional forms are tried (:func:`_variant_stage`): the
-    pulse shape (sharpness κ, from 1.5 and 4), then a sweep of its frequency (r, from ±0.2),
-    each on top of the subsets' forms so far."""
-    allowed = [m for m in MECHANISMS if m != "chip_clogging" or problem.clogging_possible]
+    ``PULSE_GATE``), the mechanisms' optional forms are tried (:func:`_variant_stage`): the
+    pulsation's pulse shape (sharpness κ, from 1.5 and 4), then a sweep of its frequency (r,
+    from ±0.2), each on top of the subsets' forms so far. A mechanism the recording cannot show
+    (clogging without a chip column) is left out."""
+    allowed = [m.name for m in catalogue() if m.can_show(problem)]
     subsets = [frozenset(m for k, m in enumerate(allowed) if mask >> k & 1) for mask in range(1 << len(allowed))]
     fits: dict = {}
     for size in range(len(allowed) + 1):
@@ -298,6 +291,7 @@ def fit_all(problem: Problem, base_params: dict, seed: dict, fits_of=fit_each) -
     full = fits[max(fits, key=len)]
     factor = problem.n_eff_factor
     if full.chi2_total * factor / max(problem.y.size * factor - full.n_params, 1.0) > PULSE_GATE:
-        _variant_stage(problem, fits, "pulsation_sharpness", (1.5, 4.0), fits_of)
-        _variant_stage(problem, fits, "pulsation_sweep", (-0.2, 0.2), fits_of)
+        for m in catalogue():
+            for variant in m.variants:
+                _variant_stage(problem, fits, variant.parameter, variant.starts, fits_of)
     return fits

@@ -34,7 +34,7 @@ Two uses:
 
 - **Characterising** (:func:`characterise`): on the final residual, the best shape is kept
   when its gain is at least ``MIN_GAIN`` and its size (the fraction of the load it changes,
-  the stretch for timing) at least ``MIN_SIZE`` — smaller departures are within any model's
+  the stretch for timing) at least its kind's ``min_size`` (:data:`SHAPE_KINDS`) — smaller departures are within any model's
   form tolerance and are not called physics — then removed, and the search repeats
   (``MAX_SHAPES``). What significant residual is left above that size is located as in
   :mod:`.locate` and reported as uncharacterised structure.
@@ -52,17 +52,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 from scipy import signal
 
+from femstudy.diagnosis.findings import Unexplained
 from femstudy.diagnosis.locate import mismatch_intervals
-from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.mechanisms.problem import Problem
 
 #: Least BIC gain (Δχ² − k ln n) for a shape to be reported.
 MIN_GAIN = 10.0
-#: Least size for a shape to count: fraction of the load (stretch for timing).
-MIN_SIZE = {"step": 0.03, "bump": 0.04, "oscillation": 0.03, "timing": 0.02, "load_power": 0.04}
 #: Least residual, as a fraction of the channel's peak modelled load, reported as structure.
 MIN_STRUCTURE = 0.03
 #: Most shapes reported per diagnosis.
@@ -104,11 +104,12 @@ class Shape:
 
     @property
     def size(self) -> float:
-        """The fraction of the load changed (amplitude for an oscillation, stretch for timing)."""
-        if self.kind == "timing":
-            return abs(self.parameters["stretch"])
-        amounts = [abs(float(b[0])) if self.kind != "oscillation" else float(np.hypot(*b[:2]))
-                   for b, u in zip(self.coefficients, self.used) if u]
+        """The fraction of the load changed (amplitude for an oscillation, stretch for timing:
+        its kind's ``size``)."""
+        spec = SHAPE_KINDS[self.kind]
+        if spec.size is not None:
+            return spec.size(self)
+        amounts = [abs(float(b[0])) for b, u in zip(self.coefficients, self.used) if u]
         return max(amounts) if amounts else 0.0
 
     def contribution(self) -> np.ndarray:
@@ -122,7 +123,7 @@ class Shape:
         for A, b, u in zip(self.columns, self.coefficients, self.used):
             if not u:
                 out.append(())
-            elif self.kind in FIXED_FIRST:
+            elif SHAPE_KINDS[self.kind].fixed_first:
                 out.append((A[:, 0], A[:, 1]))
             else:
                 out.append(tuple(A.T))
@@ -140,8 +141,8 @@ def modelled_loads(problem: Problem, params: dict, t: np.ndarray | None = None) 
     out = []
     for c in problem.channels:
         load = terms[c] * params.get(f"{c}_scale", 1.0)
-        if c == "torque_Nmm" and "clog" in terms and "torque_gain_Nmm_per_N" in params:
-            load = load + params["torque_gain_Nmm_per_N"] * params.get("thrust_N_scale", 1.0) * terms["clog"]
+        if c == "torque_Nmm" and terms["excess"]:
+            load = load + problem.torque_of_excess(params, terms)
         out.append(load)
     return t, out
 
@@ -157,72 +158,161 @@ def cut_span(problem: Problem, params: dict) -> tuple[float, float]:
     return sim.contact_s + shift, min(stop + shift, end) if math.isfinite(stop) else end
 
 
-def _candidates(problem: Problem, params: dict, t: np.ndarray, loads: list[np.ndarray]):
-    """(kind, candidates, make(channel, load, candidate) -> columns, width, scanned, interval,
-    refine(candidate) -> candidates around it, or None), for the modelled ``loads`` at ``t``."""
-    t0, t1 = cut_span(problem, params)
-    in_cut = (t >= t0) & (t <= t1)
-    step = problem.band.sigma_s / 2
-    edge = 3 * problem.band.sigma_s  # a step at contact or at the stop is the simulation's timing
-    steps = [{"time_s": float(s)} for s in np.arange(t0 + edge, t1 - edge, step)]
-    # a bump rises and falls back inside the cut: one cut short by contact or the stop is not local
-    feed, cone = problem.geometry.feed_mm_s, problem.geometry.cone_mm
+@dataclass(frozen=True)
+class Span:
+    """What the shapes are built on: the modelled ``loads`` at ``t`` (per channel), the cut
+    [t0, t1] on the recording's clock (``in_cut`` its instants of ``t``), and the scan's step in
+    time [s]."""
+
+    problem: Problem
+    t: np.ndarray
+    loads: list
+    t0: float
+    t1: float
+    in_cut: np.ndarray
+    step: float
+
+    @classmethod
+    def of(cls, problem: Problem, params: dict, t: np.ndarray, loads: list) -> "Span":
+        t0, t1 = cut_span(problem, params)
+        return cls(problem, t, loads, t0, t1, (t >= t0) & (t <= t1), problem.band.sigma_s / 2)
+
+    @property
+    def feed_mm_s(self) -> float:
+        return self.problem.geometry.feed_mm_s
+
+    @property
+    def cone_mm(self) -> float:
+        return self.problem.geometry.cone_mm
+
+
+@dataclass(frozen=True)
+class ShapeKind:
+    """One generic shape of the residual (a row of the module's table).
+
+    ``candidates(span)`` the scanned parameter sets; ``columns(span, c, L, p)`` the unsmoothed
+    columns on channel ``c``'s modelled load ``L`` for candidate ``p`` (``width`` of them);
+    ``scanned`` the scanned parameters counted in k; ``interval(span, p)`` where it acts;
+    ``refine(span, p)`` candidates around the best one, scanned again; ``size(shape)`` the
+    fraction of the load it changes (default: the largest first amplitude of a carrying
+    channel), reported when at least ``min_size``; ``fixed_first``: the first column enters
+    with coefficient 1 (a re-timing, not an amplitude); ``competes``: it may replace a
+    mechanism (:func:`competitors`)."""
+
+    name: str
+    candidates: Callable
+    columns: Callable
+    width: int
+    scanned: int
+    interval: Callable
+    min_size: float
+    refine: Callable | None = None
+    size: Callable | None = None
+    fixed_first: bool = False
+    competes: bool = True
+
+
+#: The shapes, by kind, in the order they are scanned.
+SHAPE_KINDS: dict[str, ShapeKind] = {}
+
+
+def _shape_kind(kind: ShapeKind) -> ShapeKind:
+    SHAPE_KINDS[kind.name] = kind
+    return kind
+
+
+def _steps(span: Span) -> list[dict]:
+    edge = 3 * span.problem.band.sigma_s  # a step at contact or at the stop is the simulation's timing
+    return [{"time_s": float(s)} for s in np.arange(span.t0 + edge, span.t1 - edge, span.step)]
+
+
+STEP = _shape_kind(ShapeKind("step", _steps, lambda span, c, L, p: [L * (span.t >= p["time_s"])], 1, 1,
+                             lambda span, p: (p["time_s"], span.t1), min_size=0.03))
+
+
+def _layer_width_and_latest_start(span: Span, d: float) -> tuple[float, float]:
+    """A layer of thickness ``d`` [mm] spans the cone and itself; it may start as late as falling
+    back at least halfway before the cut ends or the tip leaves the cortex."""
+    t_layers = min(span.t1, span.t0 + span.problem.geometry.cortex_mm / span.feed_mm_s)
+    w = float((d + span.cone_mm) / span.feed_mm_s)
+    return w, t_layers - w + min(d, span.cone_mm) / span.feed_mm_s / 2
+
+
+def _bumps(span: Span) -> list[dict]:
+    """Hann windows that rise and fall back inside the cut (one cut short by contact or the
+    stop is not local), and layers."""
     bumps = [{"start_s": float(s), "width_s": w} for w in BUMP_WIDTHS_S
-             for s in np.arange(t0, t1 - w, max(step, w / 8))]
-    # ... or falls back at least halfway before the cut ends or the tip leaves the cortex
-    t_layers = min(t1, t0 + problem.geometry.cortex_mm / feed)
-
-    def layer_width_and_latest_start(d):
-        w = float((d + cone) / feed)
-        return w, t_layers - w + min(d, cone) / feed / 2
-
+             for s in np.arange(span.t0, span.t1 - w, max(span.step, w / 8))]
     for d in LAYER_THICKNESS_MM:
-        w, latest = layer_width_and_latest_start(d)
+        w, latest = _layer_width_and_latest_start(span, d)
         bumps += [{"start_s": float(s), "width_s": w, "thickness_mm": d}
-                  for s in np.arange(t0, latest, max(step, w / 8))]
+                  for s in np.arange(span.t0, latest, max(span.step, w / 8))]
+    return bumps
 
-    def layer_neighbours(p):
-        """Layers around a scanned one: thickness ×0.8–1.25, the tip's entry ± half a start step."""
-        if "thickness_mm" not in p:
-            return []
-        out = []
-        for d in p["thickness_mm"] * np.geomspace(0.8, 1.25, 7):
-            w, latest = layer_width_and_latest_start(d)
-            out += [{"start_s": float(s), "width_s": w, "thickness_mm": float(d)}
-                    for s in p["start_s"] + np.linspace(-0.5, 0.5, 5) * max(step, w / 8) if t0 <= s < latest]
-        return out
 
-    cycles = [{"frequency_hz": float(f)} for f in FREQUENCIES_HZ if f * (t1 - t0) >= 1.5]
-    retimings = [{"stretch": float(e), "delay_s": float(d)} for e in np.concatenate([-STRETCHES, STRETCHES])
-                 for d in DELAYS_S]
+def _layer_neighbours(span: Span, p: dict) -> list[dict]:
+    """Layers around a scanned one: thickness ×0.8–1.25, the tip's entry ± half a start step."""
+    if "thickness_mm" not in p:
+        return []
+    out = []
+    for d in p["thickness_mm"] * np.geomspace(0.8, 1.25, 7):
+        w, latest = _layer_width_and_latest_start(span, d)
+        out += [{"start_s": float(s), "width_s": w, "thickness_mm": float(d)}
+                for s in p["start_s"] + np.linspace(-0.5, 0.5, 5) * max(span.step, w / 8) if span.t0 <= s < latest]
+    return out
 
-    def retimed(c, p):
-        return np.interp(t0 + (t - t0 - p["delay_s"]) * (1 + p["stretch"]), t, loads[c])
 
-    radius = (np.arange(LIP_POINTS) + 0.5) / LIP_POINTS   # along the lip, tip to corner (fraction of R)
+#: Along the lip, tip to corner (fraction of R): the layer's quadrature points.
+_RADIUS = (np.arange(LIP_POINTS) + 0.5) / LIP_POINTS
 
-    def bump(c, p):
-        """A Hann window, or the share of the lips inside a layer (``thickness_mm``): the lip
-        point at radius ρR is ρ·cone behind the tip; thrust weights the lip uniformly, torque by ρ."""
-        if "thickness_mm" not in p:
-            u = (t - p["start_s"]) / p["width_s"]
-            return np.where((u > 0) & (u < 1), 0.5 * (1 - np.cos(2 * math.pi * u)), 0.0)
-        below_top = feed * (t[:, None] - p["start_s"]) - radius[None, :] * cone
-        inside = (below_top >= 0) & (below_top <= p["thickness_mm"])
-        weight = radius if problem.channels[c] == "torque_Nmm" else np.ones_like(radius)
-        return inside @ weight / weight.sum()
 
-    peak = lambda L: max(float(np.max(np.abs(L))), 1e-12)
-    return [
-        ("step", steps, lambda c, L, p: [L * (t >= p["time_s"])], 1, 1, lambda p: (p["time_s"], t1), None),
-        ("bump", bumps, lambda c, L, p: [L * bump(c, p)], 1, 2, lambda p: (p["start_s"], p["start_s"] + p["width_s"]),
-         layer_neighbours),
-        ("oscillation", cycles, lambda c, L, p: [L * in_cut * np.sin(2 * math.pi * p["frequency_hz"] * t),
-                                                 L * in_cut * np.cos(2 * math.pi * p["frequency_hz"] * t)], 2, 1,
-         lambda p: (t0, t1), None),
-        ("timing", retimings, lambda c, L, p: [retimed(c, p) - L, L], 2, 2, lambda p: (t0, t1), None),
-        ("load_power", [{}], lambda c, L, p: [L ** 2 / peak(L), L], 2, 0, lambda p: (t0, t1), None),
-    ]
+def _bump(span: Span, c: int, p: dict) -> np.ndarray:
+    """A Hann window, or the share of the lips inside a layer (``thickness_mm``): the lip
+    point at radius ρR is ρ·cone behind the tip; thrust weights the lip uniformly, torque by ρ."""
+    t = span.t
+    if "thickness_mm" not in p:
+        u = (t - p["start_s"]) / p["width_s"]
+        return np.where((u > 0) & (u < 1), 0.5 * (1 - np.cos(2 * math.pi * u)), 0.0)
+    below_top = span.feed_mm_s * (t[:, None] - p["start_s"]) - _RADIUS[None, :] * span.cone_mm
+    inside = (below_top >= 0) & (below_top <= p["thickness_mm"])
+    weight = _RADIUS if span.problem.channels[c] == "torque_Nmm" else np.ones_like(_RADIUS)
+    return inside @ weight / weight.sum()
+
+
+BUMP = _shape_kind(ShapeKind("bump", _bumps, lambda span, c, L, p: [L * _bump(span, c, p)], 1, 2,
+                             lambda span, p: (p["start_s"], p["start_s"] + p["width_s"]), min_size=0.04,
+                             refine=_layer_neighbours))
+
+
+def _oscillation_columns(span: Span, c: int, L: np.ndarray, p: dict) -> list[np.ndarray]:
+    phase = 2 * math.pi * p["frequency_hz"] * span.t
+    return [L * span.in_cut * np.sin(phase), L * span.in_cut * np.cos(phase)]
+
+
+OSCILLATION = _shape_kind(ShapeKind(
+    "oscillation", lambda span: [{"frequency_hz": float(f)} for f in FREQUENCIES_HZ if f * (span.t1 - span.t0) >= 1.5],
+    _oscillation_columns, 2, 1, lambda span, p: (span.t0, span.t1), min_size=0.03,
+    size=lambda shape: max([float(np.hypot(*b[:2])) for b, u in zip(shape.coefficients, shape.used) if u],
+                           default=0.0)))
+
+
+def _retimed(span: Span, c: int, p: dict) -> np.ndarray:
+    return np.interp(span.t0 + (span.t - span.t0 - p["delay_s"]) * (1 + p["stretch"]), span.t, span.loads[c])
+
+
+TIMING = _shape_kind(ShapeKind(
+    "timing", lambda span: [{"stretch": float(e), "delay_s": float(d)}
+                            for e in np.concatenate([-STRETCHES, STRETCHES]) for d in DELAYS_S],
+    lambda span, c, L, p: [_retimed(span, c, p) - L, L], 2, 2, lambda span, p: (span.t0, span.t1), min_size=0.02,
+    size=lambda shape: abs(shape.parameters["stretch"]), fixed_first=True))
+
+
+def _peak(L: np.ndarray) -> float:
+    return max(float(np.max(np.abs(L))), 1e-12)
+
+
+LOAD_POWER = _shape_kind(ShapeKind("load_power", lambda span: [{}], lambda span, c, L, p: [L ** 2 / _peak(L), L],
+                                   2, 0, lambda span, p: (span.t0, span.t1), min_size=0.04))
 
 
 def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[np.ndarray], width: int, fixed: bool):
@@ -249,17 +339,18 @@ def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[np.ndarra
     return np.array(gains), coefs
 
 
-def _scan(problem: Problem, residuals: list, loads: list, kind: str, candidates: list, make, width: int,
-          scanned: int, interval_of, one_channel: bool, tries: int) -> Shape:
+def _scan(problem: Problem, residuals: list, span: Span, spec: ShapeKind, candidates: list, one_channel: bool,
+          tries: int) -> Shape:
     """The best of ``candidates`` of one kind (and the best channel variant); ``tries`` is the
     number of candidates looked at in all, for the look-elsewhere allowance."""
     n, n_ch = problem.y.size, len(problem.channels)
     variants = [tuple(True for _ in range(n_ch))]
     if n_ch == 2:
         variants += [(True, False), (False, True)]
-    blocks = [problem.band.smooth_model(np.vstack([col for cand in candidates for col in make(c, L, cand)])).T
-              for c, L in enumerate(loads)]
-    fixed = kind in FIXED_FIRST
+    width, scanned = spec.width, spec.scanned
+    blocks = [problem.band.smooth_model(np.vstack([col for cand in candidates for col in spec.columns(span, c, L, cand)])).T
+              for c, L in enumerate(span.loads)]
+    fixed = spec.fixed_first
     gains, coefs = _gains(problem, residuals, blocks, width, fixed)
     best = None
     for used in variants:
@@ -272,11 +363,11 @@ def _scan(problem: Problem, residuals: list, loads: list, kind: str, candidates:
         if best is None or total[j] > best[0]:
             best = (float(total[j]), j, used, k)
     gain, j, used, k = best
-    return Shape(kind, dict(candidates[j]), used,
+    return Shape(spec.name, dict(candidates[j]), used,
                  tuple(blk[:, j * width:(j + 1) * width] for blk in blocks),
                  tuple(coefs[c][j] if used[c] else np.zeros(width) for c in range(n_ch)),
                  tuple(float(gains[c][j]) if used[c] else 0.0 for c in range(n_ch)),
-                 gain, interval_of(candidates[j]), k, scanned)
+                 gain, spec.interval(span, candidates[j]), k, scanned)
 
 
 def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=None,
@@ -284,15 +375,15 @@ def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=No
     """The best candidate of each kind on ``residuals`` (best channel variant), restricted to
     ``kinds`` if given; kinds in ``one_channel_only`` may use one channel only. A kind with a
     local refinement (the layer's thickness and depth) is scanned again around its best."""
-    t, loads = modelled_loads(problem, params)
+    span = Span.of(problem, params, *modelled_loads(problem, params))
     out = []
-    for kind, candidates, make, width, scanned, interval_of, refine in _candidates(problem, params, t, loads):
-        if (kinds is not None and kind not in kinds) or not candidates:
+    for spec in SHAPE_KINDS.values():
+        candidates = spec.candidates(span) if kinds is None or spec.name in kinds else []
+        if not candidates:
             continue
-        scan = lambda cands, tries: _scan(problem, residuals, loads, kind, cands, make, width, scanned,
-                                          interval_of, kind in one_channel_only, tries)
+        scan = lambda cands, tries: _scan(problem, residuals, span, spec, cands, spec.name in one_channel_only, tries)
         best = scan(candidates, len(candidates))
-        local = refine(best.parameters) if refine else []
+        local = spec.refine(span, best.parameters) if spec.refine else []
         if local:
             finer = scan(local, len(candidates) + len(local))
             best = finer if finer.gain > best.gain else best
@@ -301,8 +392,8 @@ def shapes(problem: Problem, params: dict, residuals: list[np.ndarray], kinds=No
 
 
 def material(shape: Shape) -> bool:
-    """Gain and size both large enough to report (``MIN_GAIN``, ``MIN_SIZE``)."""
-    return shape.gain >= MIN_GAIN and shape.size >= MIN_SIZE[shape.kind]
+    """Gain and size both large enough to report (``MIN_GAIN``, the kind's ``min_size``)."""
+    return shape.gain >= MIN_GAIN and shape.size >= SHAPE_KINDS[shape.kind].min_size
 
 
 def characterise(problem: Problem, params: dict, residual: np.ndarray) -> list[Shape]:
@@ -319,17 +410,13 @@ def characterise(problem: Problem, params: dict, residual: np.ndarray) -> list[S
     return found
 
 
-COMPETING = ("step", "bump", "timing", "load_power", "oscillation")
-#: Shapes whose first column is a fixed change of the model (the re-timing), not an amplitude.
-FIXED_FIRST = ("timing",)
-
-
 def competitors(problem: Problem, params: dict, residual: np.ndarray) -> list[Shape]:
     """The material shapes, one per kind, that may explain ``residual`` among those no mechanism
     produces (see the module; an oscillation competes only when one channel carries it),
     largest gain first."""
     one = ("oscillation",) if problem.has_torque else ()
-    kinds = COMPETING if problem.has_torque else tuple(k for k in COMPETING if k != "oscillation")
+    competing = tuple(k for k, spec in SHAPE_KINDS.items() if spec.competes)
+    kinds = competing if problem.has_torque else tuple(k for k in competing if k != "oscillation")
     found = [s for s in shapes(problem, params, [r for r in residual], kinds, one) if material(s)]
     return sorted(found, key=lambda s: -s.gain)
 
@@ -430,35 +517,34 @@ def describe(problem: Problem, shape: Shape) -> tuple[str, str, str]:
 
 
 def report(problem: Problem, found: list[Shape], leftover: np.ndarray, spindle: dict | None,
-           span: tuple[float, float], peak_loads: np.ndarray) -> list[dict]:
-    """The contract's ``unexplained`` entries: described shapes, the spindle, and located
+           span: tuple[float, float], peak_loads: np.ndarray) -> tuple[Unexplained, ...]:
+    """The ``unexplained`` findings: described shapes, the spindle, and located
     residual the shapes leave that is larger than ``MIN_STRUCTURE`` of the peak load."""
     out = []
     if spindle is not None:
-        out.append({"start_s": round(span[0], 3), "end_s": round(span[1], 3), "channel": "both", "kind": "spindle",
-                    "description": (f"the spindle turns slower than stated while cutting: its ripple line is at "
-                                    f"{spindle['line_hz']:.2f} Hz, {100 * spindle['speed_drop']:.0f} % below "
-                                    f"N/60 = {spindle['stated_hz']:.2f} Hz, so the feed per revolution and the "
-                                    f"loads are higher (a spindle slowing under load, or a wrong spindle_rpm)."),
-                    "evidence": spindle})
+        out.append(Unexplained(round(span[0], 3), round(span[1], 3), "both", "spindle",
+                               f"the spindle turns slower than stated while cutting: its ripple line is at "
+                               f"{spindle['line_hz']:.2f} Hz, {100 * spindle['speed_drop']:.0f} % below "
+                               f"N/60 = {spindle['stated_hz']:.2f} Hz, so the feed per revolution and the "
+                               f"loads are higher (a spindle slowing under load, or a wrong spindle_rpm).",
+                               spindle))
     for s in found:
         kind, channel, text = describe(problem, s)
-        out.append({"start_s": round(float(s.interval[0]), 3), "end_s": round(float(s.interval[1]), 3),
-                    "channel": channel, "kind": kind, "description": text,
-                    "evidence": {"delta_bic": round(s.gain, 1), "size": round(s.size, 4),
-                                 **{k: round(v, 4) for k, v in s.parameters.items()}}})
+        out.append(Unexplained(round(float(s.interval[0]), 3), round(float(s.interval[1]), 3), channel, kind, text,
+                               {"delta_bic": round(s.gain, 1), "size": round(s.size, 4),
+                                **{k: round(v, 4) for k, v in s.parameters.items()}}))
     z = leftover / problem.sigma
     for c, name in enumerate(problem.channels):
         big = np.abs(leftover[c]) >= MIN_STRUCTURE * peak_loads[c]
         for interval in mismatch_intervals(problem.band.t_dec, np.where(big, z[c], 0.0), problem.n_eff_factor, name,
                                            chi2_of=lambda lo, hi, c=c: interval_chi2(problem, c, leftover[c], lo, hi)):
-            out.append({"start_s": round(interval["start_s"], 3), "end_s": round(interval["end_s"], 3),
-                        "channel": name, "kind": "structure",
-                        "description": f"residual structure in the {NAME[name]} that none of the shapes describes "
-                                       f"(up to {100 * float(np.max(np.abs(leftover[c][(problem.band.t_dec >= interval['start_s']) & (problem.band.t_dec <= interval['end_s'])]))) / peak_loads[c]:.0f} % "
-                                       f"of the peak load, max |z| = {interval['max_abs_z']:.1f})",
-                        "evidence": {"significance": interval["significance"]}})
-    return sorted(out, key=lambda u: (u["start_s"], u["channel"]))
+            inside = (problem.band.t_dec >= interval["start_s"]) & (problem.band.t_dec <= interval["end_s"])
+            share = 100 * float(np.max(np.abs(leftover[c][inside]))) / peak_loads[c]
+            out.append(Unexplained(round(interval["start_s"], 3), round(interval["end_s"], 3), name, "structure",
+                                   f"residual structure in the {NAME[name]} that none of the shapes describes "
+                                   f"(up to {share:.0f} % of the peak load, max |z| = {interval['max_abs_z']:.1f})",
+                                   {"significance": interval["significance"]}))
+    return tuple(sorted(out, key=lambda u: (u.start_s, u.channel)))
 
 
 def interval_chi2(problem: Problem, c: int, r: np.ndarray, lo: int, hi: int) -> float:

@@ -11,7 +11,7 @@
    subset is first refitted from the larger subset's optimum, and keeps the better fit):
    - drop-one ΔBIC = BIC(s − m) − BIC(s) ≥ ``MIN_DELTA_BIC`` ("very strong" evidence on the
      Kass–Raftery scale);
-   - a physically meaningful size (``THRESHOLDS``, below);
+   - a physically meaningful size (each mechanism's ``threshold``, :mod:`.mechanisms`);
    - held-out prediction: in a K-fold split into contiguous blocks of the compared window,
      the subset with the mechanism predicts the held-out blocks better than without it.
 3. Confidence of each mechanism: its posterior inclusion probability from the BIC weights
@@ -29,23 +29,13 @@ import numpy as np
 from scipy import stats
 
 from femstudy.diagnosis.fit import Fit, fit_each
-from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.mechanisms.problem import Problem
+from femstudy.diagnosis.mechanisms.registry import catalogue, mechanism, owner
 
 MIN_DELTA_BIC = 10.0
 #: A residual χ² test p-value at or below this is "not consistent with noise".
 RESIDUAL_P = 1e-3
 FOLDS = 5
-#: Smallest sizes that count as missing physics: clogging rise by breakthrough and softening
-#: loss by the end of the cut (fractions of the load), pulsation amplitude (fraction of the
-#: feed), drift over the recording (fraction of the peak simulated load). They keep a mechanism
-#: from soaking up a small simulation error in the cut; a drift shows outside the cut too, so
-#: its floor is low.
-MIN_CLOGGING_RISE = 0.05
-MIN_PULSATION_AMPLITUDE = 0.02
-MIN_DRIFT_FRACTION = 0.001
-MIN_SOFTENING_LOSS = 0.05
-
-
 @dataclass
 class Selection:
     """The selected subset and the evidence for it."""
@@ -74,31 +64,12 @@ def bic_table(problem: Problem, fits: dict) -> tuple[dict, np.ndarray]:
 
 
 def effect_sizes(problem: Problem, fit: Fit) -> dict:
-    """Size of each mechanism of a fit, in the units the thresholds use."""
-    p, g = fit.params, problem.geometry
-    sizes = {}
-    peak = max(float(np.max(np.abs(problem.simulation.loads(problem.band.t_model - p["shift_s"])[0]))), 1e-9)
-    if "growth_exponent" in p:
-        sizes["chip_clogging"] = math.expm1(p["growth_exponent"] * problem.clogging_span(p))
-    if "pulsation_a" in p:
-        sizes["feed_pulsation"] = math.hypot(p["pulsation_a"], p["pulsation_b"])
-    if "thrust_N_drift_per_s" in p:
-        span = problem.band.t_dec[-1] - problem.band.t_dec[0]
-        fractions = [abs(p["thrust_N_drift_per_s"]) * span / peak]
-        if "torque_Nmm_drift_per_s" in p:
-            torque = problem.simulation.loads(problem.band.t_model - p["shift_s"])[1]
-            fractions.append(abs(p["torque_Nmm_drift_per_s"]) * span / max(float(np.max(np.abs(torque))), 1e-9))
-        sizes["sensor_drift"] = max(fractions)
-    if "softening_fraction" in p:
-        cut = problem.simulation.stop_s - problem.simulation.contact_s
-        if not math.isfinite(cut):
-            cut = problem.band.t_dec[-1] - problem.simulation.contact_s
-        sizes["thermal_softening"] = p["softening_fraction"] * -math.expm1(-cut / 10 ** p["softening_log10_tau_s"])
-    return sizes
-
-
-THRESHOLDS = {"chip_clogging": MIN_CLOGGING_RISE, "feed_pulsation": MIN_PULSATION_AMPLITUDE,
-              "sensor_drift": MIN_DRIFT_FRACTION, "thermal_softening": MIN_SOFTENING_LOSS}
+    """Size of each mechanism of a fit, in the units of its threshold: the smallest size that
+    counts as missing physics (clogging rise by breakthrough and softening loss by the end of
+    the cut, fractions of the load; pulsation amplitude, a fraction of the feed; drift over the
+    recording, a fraction of the peak simulated load). The thresholds keep a mechanism from
+    soaking up a small simulation error in the cut."""
+    return {m.name: m.size(problem, fit.params) for m in catalogue() if m.name in fit.subset}
 
 
 def folds(problem: Problem) -> list[np.ndarray]:
@@ -147,7 +118,8 @@ def select(problem: Problem, fits: dict, fits_of=fit_each) -> Selection:
         smallers = [subset - {m} for m in subset]
         variant = fits[subset].variant
         polishes = fits_of([(problem, s, [{n: fits[subset].params[n] for n in problem.nonlinear_names(s, variant)}],
-                                      {"variant": variant if "feed_pulsation" in s else ()}) for s in smallers])
+                                      {"variant": tuple(v for v in variant if owner(v).name in s)})
+                             for s in smallers])
         for smaller, polished in zip(smallers, polishes):
             if polished.chi2_total < fits[smaller].chi2_total:
                 fits[smaller] = polished
@@ -159,8 +131,8 @@ def select(problem: Problem, fits: dict, fits_of=fit_each) -> Selection:
             delta = bic[subset - {m}] - bic[subset]
             if delta < MIN_DELTA_BIC:
                 reasons[m] = (delta, f"drop-one BIC difference {delta:.1f} < {MIN_DELTA_BIC:g}")
-            elif sizes[m] < THRESHOLDS[m]:
-                reasons[m] = (delta, f"size {sizes[m]:.3g} below {THRESHOLDS[m]:g}")
+            elif sizes[m] < mechanism(m).threshold:
+                reasons[m] = (delta, f"size {sizes[m]:.3g} below {mechanism(m).threshold:g}")
         if not reasons:
             missing = [s for s in [subset] + [subset - {m} for m in subset] if s not in held_out]
             held_out.update(zip(missing, held_out_chi2(problem, [fits[s] for s in missing], inflation, fits_of)))

@@ -1,4 +1,5 @@
-"""Synthetic diagnosis cases: a recording with concealed missing physics and its simulation.
+"""Synthetic diagnosis cases: a recording with concealed missing physics and its simulation
+(the fixtures of tests/test_diagnose.py and of bench/diagnose.py; not part of the package).
 
 Each class draws its cutting conditions and effect sizes from the ranges below (a seeded
 ``numpy`` generator); the recording comes from :func:`femstudy.recordings.synthesize` with
