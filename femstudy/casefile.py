@@ -361,8 +361,8 @@ class InputSpec(_Section):
         return self
 
     def to_distribution(self):
-        """The library's :class:`femstudy.uncertainty.inputs.Distribution`."""
-        from femstudy.uncertainty.inputs import Distribution
+        """The library's :class:`femstudy.distributions.Distribution`."""
+        from femstudy.distributions import Distribution
 
         if self.distribution == "discrete":
             return Distribution("discrete", tuple(float(v) for v in self.values), self.source)
@@ -388,7 +388,7 @@ class UncertaintySpec(_Section):
 
     @model_validator(mode="after")
     def _known_inputs(self):
-        from femstudy.uncertainty.inputs import INPUTS
+        from femstudy.distributions import INPUTS
 
         unknown = sorted((set(self.inputs) | set(self.distributions)) - set(INPUTS))
         if unknown:

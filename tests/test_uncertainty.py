@@ -13,7 +13,8 @@ from femstudy import fe
 from femstudy.casefile import parse_case
 from femstudy.errors import UserError
 from femstudy.uncertainty import design
-from femstudy.uncertainty.inputs import INPUTS, default_distributions
+from femstudy.distributions import INPUTS
+from femstudy.uncertainty.inputs import default_distributions
 
 CASE = """
 name = "unc"

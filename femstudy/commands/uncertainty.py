@@ -7,7 +7,7 @@ from pathlib import Path
 
 
 def _names(text: str) -> tuple[str, ...]:
-    from femstudy.uncertainty.inputs import INPUTS, LOAD_INPUTS, STIFFNESS_INPUTS
+    from femstudy.distributions import INPUTS, LOAD_INPUTS, STIFFNESS_INPUTS
 
     groups = {"load": LOAD_INPUTS, "stiffness": STIFFNESS_INPUTS, "all": tuple(INPUTS)}
     out = []

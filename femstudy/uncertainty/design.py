@@ -1,7 +1,7 @@
 """Sample designs in the unit cube and the Sobol analysis of their outputs (SALib).
 
 Both methods draw points u ∈ (0, 1)^D; an input's value is its distribution's quantile at u
-(:meth:`femstudy.uncertainty.inputs.Distribution.ppf`), so the inputs are independent with the
+(:meth:`femstudy.distributions.Distribution.ppf`), so the inputs are independent with the
 stated marginals, and a design depends only on (method, D, samples, seed) — a run killed and
 started again draws the same points.
 

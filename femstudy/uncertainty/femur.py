@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from femstudy.uncertainty.inputs import STIFFNESS_INPUTS, Distribution, distributions, nominal_values
+from femstudy.distributions import STIFFNESS_INPUTS, Distribution
+from femstudy.uncertainty.inputs import distributions, nominal_values
 from femstudy.uncertainty.loads import amplitudes, sample_conditions, sample_loading
 from femstudy.uncertainty.reduced import RTOL, ReducedBases, StiffnessFamily, StiffnessPoint, train
 from femstudy.uncertainty.response import Envelope, UnitResponses

@@ -236,7 +236,7 @@ def run_uncertainty(cases, out: str | PathLike | None = None, *, samples: int | 
 
 
 def _varies_stiffness(names) -> bool:
-    from femstudy.uncertainty.inputs import STIFFNESS_INPUTS
+    from femstudy.distributions import STIFFNESS_INPUTS
 
     return any(n in STIFFNESS_INPUTS for n in names)
 
