@@ -197,7 +197,8 @@ class ShapeKind:
     fraction of the load it changes (default: the largest first amplitude of a carrying
     channel), reported when at least ``min_size``; ``fixed_first``: the first column enters
     with coefficient 1 (a re-timing, not an amplitude); ``competes``: it may replace a
-    mechanism (:func:`competitors`)."""
+    mechanism (:func:`competitors`); ``describe(wording)`` the report's (kind, text) of a
+    found shape (:class:`Wording`)."""
 
     name: str
     candidates: Callable
@@ -206,10 +207,25 @@ class ShapeKind:
     scanned: int
     interval: Callable
     min_size: float
+    describe: Callable
     refine: Callable | None = None
     size: Callable | None = None
     fixed_first: bool = False
     competes: bool = True
+
+
+@dataclass(frozen=True)
+class Wording:
+    """What a found shape's description reads: the channels it uses (``names``), ``only`` ("thrust
+    only" when one channel carries it, else ""), its first amplitudes in % (``pct``) and as a
+    phrase (``amounts``), its coefficients by channel and its parameters."""
+
+    names: list
+    only: str
+    pct: dict
+    amounts: str
+    coef: dict
+    parameters: dict
 
 
 #: The shapes, by kind, in the order they are scanned.
@@ -226,8 +242,19 @@ def _steps(span: Span) -> list[dict]:
     return [{"time_s": float(s)} for s in np.arange(span.t0 + edge, span.t1 - edge, span.step)]
 
 
+def _describe_step(w: Wording) -> tuple[str, str]:
+    p = w.parameters
+    if w.only:
+        one = NAME[w.names[0]]
+        return f"{one}_only", (f"{w.only}: from {p['time_s']:.2f} s the {one} changes by {w.pct[w.names[0]]:+.1f} % "
+                               f"while the other channel follows the model: friction on the drill's body or in the "
+                               f"flutes that loads one channel and not the other, or a change in one sensor channel.")
+    return "step", (f"a step at {p['time_s']:.2f} s: {w.amounts} from then on. No catalogue mechanism changes the "
+                    f"loads at one instant (a chip plug breaking off, a crack, a slip).")
+
+
 STEP = _shape_kind(ShapeKind("step", _steps, lambda span, c, L, p: [L * (span.t >= p["time_s"])], 1, 1,
-                             lambda span, p: (p["time_s"], span.t1), min_size=0.03))
+                             lambda span, p: (p["time_s"], span.t1), min_size=0.03, describe=_describe_step))
 
 
 def _layer_width_and_latest_start(span: Span, d: float) -> tuple[float, float]:
@@ -279,9 +306,16 @@ def _bump(span: Span, c: int, p: dict) -> np.ndarray:
     return inside @ weight / weight.sum()
 
 
+def _describe_bump(w: Wording) -> tuple[str, str]:
+    p = w.parameters
+    return (f"{NAME[w.names[0]]}_only" if w.only else "bump",
+            f"a local change between {p['start_s']:.2f} and {p['start_s'] + p['width_s']:.2f} s: {w.amounts} "
+            f"there{', ' + w.only if w.only else ''}, as from a harder or softer layer of bone.")
+
+
 BUMP = _shape_kind(ShapeKind("bump", _bumps, lambda span, c, L, p: [L * _bump(span, c, p)], 1, 2,
                              lambda span, p: (p["start_s"], p["start_s"] + p["width_s"]), min_size=0.04,
-                             refine=_layer_neighbours))
+                             describe=_describe_bump, refine=_layer_neighbours))
 
 
 def _oscillation_columns(span: Span, c: int, L: np.ndarray, p: dict) -> list[np.ndarray]:
@@ -289,9 +323,18 @@ def _oscillation_columns(span: Span, c: int, L: np.ndarray, p: dict) -> list[np.
     return [L * span.in_cut * np.sin(phase), L * span.in_cut * np.cos(phase)]
 
 
+def _describe_oscillation(w: Wording) -> tuple[str, str]:
+    amp = {n: 100 * float(np.hypot(*w.coef[n][:2])) for n in w.names}
+    return "oscillation", (f"an oscillation at {w.parameters['frequency_hz']:.2f} Hz in {w.only or 'both channels'}, ±"
+                           + " and ±".join(f"{amp[n]:.1f} % of the {NAME[n]}" for n in w.names)
+                           + (": a feed pulsation would move thrust and torque together, so this is another "
+                              "vibration (fixture, bone support, misalignment)." if w.only else
+                              ", not of the feed pulsation's form (its depth lead and coupling do not fit)."))
+
+
 OSCILLATION = _shape_kind(ShapeKind(
     "oscillation", lambda span: [{"frequency_hz": float(f)} for f in FREQUENCIES_HZ if f * (span.t1 - span.t0) >= 1.5],
-    _oscillation_columns, 2, 1, lambda span, p: (span.t0, span.t1), min_size=0.03,
+    _oscillation_columns, 2, 1, lambda span, p: (span.t0, span.t1), min_size=0.03, describe=_describe_oscillation,
     size=lambda shape: max([float(np.hypot(*b[:2])) for b, u in zip(shape.coefficients, shape.used) if u],
                            default=0.0)))
 
@@ -300,19 +343,31 @@ def _retimed(span: Span, c: int, p: dict) -> np.ndarray:
     return np.interp(span.t0 + (span.t - span.t0 - p["delay_s"]) * (1 + p["stretch"]), span.t, span.loads[c])
 
 
+def _describe_timing(w: Wording) -> tuple[str, str]:
+    stretch = 100 * w.parameters["stretch"]
+    scales = " and ".join(f"the {NAME[n]} by {100 * float(w.coef[n][1]):+.1f} %" for n in w.names)
+    return "timing", (f"a timing mismatch: after contact the recording runs {abs(stretch):.1f} % "
+                      f"{'ahead of' if stretch > 0 else 'behind'} the simulation (its breakthrough and stop come "
+                      f"{'earlier' if stretch > 0 else 'later'}), with {scales}: the feed rate or the recording's "
+                      f"clock is not the stated one.")
+
+
 TIMING = _shape_kind(ShapeKind(
     "timing", lambda span: [{"stretch": float(e), "delay_s": float(d)}
                             for e in np.concatenate([-STRETCHES, STRETCHES]) for d in DELAYS_S],
     lambda span, c, L, p: [_retimed(span, c, p) - L, L], 2, 2, lambda span, p: (span.t0, span.t1), min_size=0.02,
-    size=lambda shape: abs(shape.parameters["stretch"]), fixed_first=True))
+    describe=_describe_timing, size=lambda shape: abs(shape.parameters["stretch"]), fixed_first=True))
 
 
 def _peak(L: np.ndarray) -> float:
     return max(float(np.max(np.abs(L))), 1e-12)
 
 
-LOAD_POWER = _shape_kind(ShapeKind("load_power", lambda span: [{}], lambda span, c, L, p: [L ** 2 / _peak(L), L],
-                                   2, 0, lambda span, p: (span.t0, span.t1), min_size=0.04))
+LOAD_POWER = _shape_kind(ShapeKind(
+    "load_power", lambda span: [{}], lambda span, c, L, p: [L ** 2 / _peak(L), L], 2, 0,
+    lambda span, p: (span.t0, span.t1), min_size=0.04,
+    describe=lambda w: ("load_power", f"an excess that grows with the load itself ({w.amounts} at the peak load), as "
+                                      f"when the spindle slows under load or the sensor is non-linear.")))
 
 
 def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[np.ndarray], width: int, fixed: bool):
@@ -479,40 +534,7 @@ def describe(problem: Problem, shape: Shape) -> tuple[str, str, str]:
     coef = dict(zip(problem.channels, shape.coefficients))
     pct = {n: 100 * float(coef[n][0]) for n in names}
     amounts = " and ".join(f"the {NAME[n]} by {pct[n]:+.1f} %" for n in names)
-    p = shape.parameters
-    if shape.kind == "step" and only:
-        kind = f"{NAME[names[0]]}_only"
-        text = (f"{only}: from {p['time_s']:.2f} s the {NAME[names[0]]} changes by {pct[names[0]]:+.1f} % while the "
-                f"other channel follows the model: friction on the drill's body or in the flutes that loads one "
-                f"channel and not the other, or a change in one sensor channel.")
-    elif shape.kind == "step":
-        kind = "step"
-        text = (f"a step at {p['time_s']:.2f} s: {amounts} from then on. No catalogue mechanism changes the loads "
-                f"at one instant (a chip plug breaking off, a crack, a slip).")
-    elif shape.kind == "bump":
-        kind = f"{NAME[names[0]]}_only" if only else "bump"
-        text = (f"a local change between {p['start_s']:.2f} and {p['start_s'] + p['width_s']:.2f} s: {amounts} "
-                f"there{', ' + only if only else ''}, as from a harder or softer layer of bone.")
-    elif shape.kind == "oscillation":
-        kind = "oscillation"
-        amp = {n: 100 * float(np.hypot(*coef[n][:2])) for n in names}
-        text = (f"an oscillation at {p['frequency_hz']:.2f} Hz in {only or 'both channels'}, ±"
-                + " and ±".join(f"{amp[n]:.1f} % of the {NAME[n]}" for n in names)
-                + (": a feed pulsation would move thrust and torque together, so this is another vibration "
-                   "(fixture, bone support, misalignment)." if only else
-                   ", not of the feed pulsation's form (its depth lead and coupling do not fit)."))
-    elif shape.kind == "timing":
-        kind = "timing"
-        stretch = 100 * p["stretch"]
-        scales = " and ".join(f"the {NAME[n]} by {100 * float(coef[n][1]):+.1f} %" for n in names)
-        text = (f"a timing mismatch: after contact the recording runs {abs(stretch):.1f} % "
-                f"{'ahead of' if stretch > 0 else 'behind'} the simulation (its breakthrough and stop come "
-                f"{'earlier' if stretch > 0 else 'later'}), with {scales}: the feed rate or the recording's clock "
-                f"is not the stated one.")
-    else:
-        kind = "load_power"
-        text = (f"an excess that grows with the load itself ({amounts} at the peak load), as when the spindle "
-                f"slows under load or the sensor is non-linear.")
+    kind, text = SHAPE_KINDS[shape.kind].describe(Wording(names, only, pct, amounts, coef, shape.parameters))
     return kind, channel, text
 
 
