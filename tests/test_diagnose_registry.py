@@ -54,3 +54,14 @@ def test_a_mechanism_registered_elsewhere_is_fitted_selected_and_explained(toy):
     assert "toy_step" in named, d.to_json()["selection"]
     assert named["toy_step"].parameters["drop"] == pytest.approx(0.2, abs=0.03)
     assert math.isfinite(d.to_json()["selection"]["inclusion_probability"]["toy_step"])
+
+
+def test_subsets_are_walked_in_catalogue_order():
+    """Results must not depend on a set's iteration order (it changes with PYTHONHASHSEED):
+    in_order gives the catalogue's order whatever collection it is handed."""
+    from femstudy.diagnosis.mechanisms.registry import in_order, names
+
+    every = names()
+    assert in_order(frozenset(reversed(every))) == every
+    assert in_order({every[-1], every[0]}) == (every[0], every[-1])
+    assert in_order(set()) == ()

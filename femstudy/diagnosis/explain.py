@@ -6,7 +6,7 @@ from __future__ import annotations
 from femstudy.diagnosis.findings import Evidence, NamedMechanism
 from femstudy.diagnosis.fit import Fit
 from femstudy.diagnosis.mechanisms.problem import Problem
-from femstudy.diagnosis.mechanisms.registry import mechanism, significant as _r
+from femstudy.diagnosis.mechanisms.registry import in_order, mechanism, significant as _r
 from femstudy.diagnosis.select import Selection, effect_sizes
 from femstudy.diagnosis.verdict import Verdict
 
@@ -18,7 +18,7 @@ def mechanisms(problem: Problem, fit: Fit, selection: Selection, verdict: Verdic
     out = []
     sizes = effect_sizes(problem, fit)
     subset = verdict.subset
-    for m in sorted(subset, key=lambda m: -verdict.confidence[m]):
+    for m in sorted(in_order(subset), key=lambda m: -verdict.confidence[m]):
         params, text = mechanism(m).explain(problem, fit.params, bone_mu_w)
         delta = selection.bic[subset - {m}] - selection.bic[subset]
         out.append(NamedMechanism(m, verdict.confidence[m], params, text,

@@ -27,7 +27,7 @@ from scipy import optimize, signal
 from scipy.linalg import lapack
 
 from femstudy.diagnosis.mechanisms.problem import Problem
-from femstudy.diagnosis.mechanisms.registry import catalogue, nonnegative_linear, owner
+from femstudy.diagnosis.mechanisms.registry import catalogue, in_order, nonnegative_linear, owner
 
 #: Time constants of the stand-ins scanned [s], and the one used while another scan runs.
 TAU_GRID_S = np.geomspace(0.2, 40.0, 16)
@@ -235,7 +235,7 @@ def starting_points(subset: frozenset, base_params: dict, seed: dict, smaller: d
     starts = [fixed]
     if len(subset) == 1:
         starts += [{**fixed, **s} for s in seed[next(iter(subset))][1:]]
-    previous = [smaller[subset - {m}] for m in subset if subset - {m} in smaller]
+    previous = [smaller[subset - {m}] for m in in_order(subset) if subset - {m} in smaller]
     if previous:
         best = min(previous, key=lambda f: f.chi2_total)
         starts.append({**fixed, **best.params})

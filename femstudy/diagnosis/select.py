@@ -30,7 +30,7 @@ from scipy import stats
 
 from femstudy.diagnosis.fit import Fit, fit_each
 from femstudy.diagnosis.mechanisms.problem import Problem
-from femstudy.diagnosis.mechanisms.registry import catalogue, mechanism, owner
+from femstudy.diagnosis.mechanisms.registry import catalogue, in_order, mechanism, owner
 
 MIN_DELTA_BIC = 10.0
 #: A residual χ² test p-value at or below this is "not consistent with noise".
@@ -107,7 +107,7 @@ def select(problem: Problem, fits: dict, fits_of=fit_each) -> Selection:
     best = min(bic, key=bic.get)
     weights = {s: math.exp(-(b - bic[best]) / 2) for s, b in bic.items()}
     total = sum(weights.values())
-    mechanisms = {m for s in fits for m in s}
+    mechanisms = in_order({m for s in fits for m in s})
     confidence = {m: sum(w for s, w in weights.items() if m in s) / total for m in mechanisms}
 
     dropped, held_out = {}, {}
@@ -115,7 +115,7 @@ def select(problem: Problem, fits: dict, fits_of=fit_each) -> Selection:
     n_eff = problem.y.size * problem.n_eff_factor
     while subset:
         # each smaller fit also from the larger optimum: fits are multimodal
-        smallers = [subset - {m} for m in subset]
+        smallers = [subset - {m} for m in in_order(subset)]
         variant = fits[subset].variant
         polishes = fits_of([(problem, s, [{n: fits[subset].params[n] for n in problem.nonlinear_names(s, variant)}],
                                       {"variant": tuple(v for v in variant if owner(v).name in s)})
@@ -127,16 +127,16 @@ def select(problem: Problem, fits: dict, fits_of=fit_each) -> Selection:
                                 + polished.n_params * math.log(n_eff))
         reasons = {}
         sizes = effect_sizes(problem, fits[subset])
-        for m in subset:
+        for m in in_order(subset):
             delta = bic[subset - {m}] - bic[subset]
             if delta < MIN_DELTA_BIC:
                 reasons[m] = (delta, f"drop-one BIC difference {delta:.1f} < {MIN_DELTA_BIC:g}")
             elif sizes[m] < mechanism(m).threshold:
                 reasons[m] = (delta, f"size {sizes[m]:.3g} below {mechanism(m).threshold:g}")
         if not reasons:
-            missing = [s for s in [subset] + [subset - {m} for m in subset] if s not in held_out]
+            missing = [s for s in [subset] + [subset - {m} for m in in_order(subset)] if s not in held_out]
             held_out.update(zip(missing, held_out_chi2(problem, [fits[s] for s in missing], inflation, fits_of)))
-            for m in subset:
+            for m in in_order(subset):
                 if held_out[subset - {m}] <= held_out[subset]:
                     reasons[m] = (held_out[subset - {m}] - held_out[subset],
                                   f"does not improve held-out prediction "

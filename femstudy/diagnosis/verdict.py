@@ -34,6 +34,7 @@ from scipy import stats
 from femstudy.diagnosis import openworld
 from femstudy.diagnosis.fit import Fit, fit_each
 from femstudy.diagnosis.mechanisms import Problem
+from femstudy.diagnosis.mechanisms.registry import in_order
 from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection
 
 #: Highest confidence when the final residual is not consistent with noise.
@@ -102,7 +103,7 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
         replaced, kept, shape = best
         delta = full - replaced
         kind, channel, _ = openworld.describe(problem, shape)
-        for m in subset - kept:
+        for m in in_order(subset - kept):
             dropped[m] = (f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its place "
                           f"(BIC lower by {delta:.1f})")
         subset = kept
@@ -126,5 +127,5 @@ def decide(problem: Problem, fits: dict, selection: Selection, baseline: Fit, fi
     base_excess = _excess(problem, baseline)
     share = 1.0 - _excess(problem, fit) / base_excess if base_excess > 0 else 1.0
     cap = 1.0 if p_value > RESIDUAL_P else FAILED_TEST_CAP
-    confidence = {m: round(float(selection.confidence.get(m, 0.0) * min(max(share, 0.0), cap)), 4) for m in subset}
+    confidence = {m: round(float(selection.confidence.get(m, 0.0) * min(max(share, 0.0), cap)), 4) for m in in_order(subset)}
     return Verdict(subset, fit, tuple(found), dropped, confidence, chi2_dof, p_value)

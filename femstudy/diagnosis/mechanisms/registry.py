@@ -177,6 +177,13 @@ def names() -> tuple[str, ...]:
     return tuple(m.name for m in catalogue())
 
 
+def in_order(subset) -> tuple[str, ...]:
+    """The names of ``subset`` (any collection of mechanism names) in the catalogue's order: a
+    set's own order changes from one process to the next (string hashing), so every loop whose
+    order reaches a result or a file goes through this."""
+    return tuple(n for n in names() if n in subset)
+
+
 def mechanism(name: str) -> Mechanism:
     """The registered mechanism ``name``."""
     catalogue()
