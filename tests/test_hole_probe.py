@@ -179,3 +179,27 @@ def test_points_just_inside_any_element_are_found_in_it(p2):
     points = np.einsum("nk,nkj->nj", weights, turned)
     found = point_probe(system, points).element
     assert (found == np.arange(n)).all(), f"{np.sum(found != np.arange(n))} of {n} points placed elsewhere"
+
+
+def test_kept_sample_points_are_the_computed_ones_and_a_tampered_store_is_not_used(p2, tmp_path, caplog):
+    """distance_samples with a keep folder stores its points once and serves them again; a store
+    whose points were moved off their distance is ignored (logged) and the points recomputed."""
+    from femstudy.hole.measures import distance_samples, samples_fingerprint
+
+    station, system = p2
+    fresh = distance_samples(system, station, (0.5, 1.0))
+    first = distance_samples(system, station, (0.5, 1.0), tmp_path)
+    stored = tmp_path / f"samples-{samples_fingerprint(system, station, (0.5, 1.0))}.npz"
+    assert stored.is_file()
+    again = distance_samples(system, station, (0.5, 1.0), tmp_path)
+    for a, b, c in zip(fresh, first, again):
+        for part in ("points", "element", "wall"):
+            np.testing.assert_array_equal(getattr(a, part), getattr(b, part))
+            np.testing.assert_array_equal(getattr(a, part), getattr(c, part))
+    arrays = dict(np.load(stored))
+    arrays["points_1"] = arrays["points_1"] * 1.001
+    np.savez(stored, **arrays)
+    with caplog.at_level("WARNING"):
+        mended = distance_samples(system, station, (0.5, 1.0), tmp_path)
+    assert "fail the check" in caplog.text
+    np.testing.assert_array_equal(mended[1].points, fresh[1].points)

@@ -25,7 +25,9 @@ Stresses are the elements' own P2 fields at the points (σ = D B u_e), strains �
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, fields
+from pathlib import Path
 
 import numpy as np
 
@@ -33,6 +35,8 @@ from femstudy.failure import cancellous_strength_ratio, cortical_strength_ratio,
 from femstudy.fe.post import quadrature_points, stress_projection, von_mises
 from femstudy.femur_mesh import CORTICAL
 from femstudy.hole.samples import hole_distance, offset_samples
+
+log = logging.getLogger(__name__)
 
 #: Measure kinds: at a distance from the hole surface (wall, corner, cone and tip), at a
 #: distance from its cylindrical wall only (r = R + δ over the engaged depth), or the maximum
@@ -160,12 +164,27 @@ class DistanceSamples:
     wall: np.ndarray
 
 
-def distance_samples(system, station, distances_mm) -> tuple[DistanceSamples, ...]:
+def distance_samples(system, station, distances_mm, keep: Path | None = None) -> tuple[DistanceSamples, ...]:
     """The sample points at each distance δ from the hole (module docstring), with the points
     where the curve leaves the bone or crosses a material interface, located in ``system``'s
-    mesh; any solution on that mesh (other materials, other loads) is measured on them."""
+    mesh; any solution on that mesh (other materials, other loads) is measured on them.
+
+    They depend on geometry alone: with a ``keep`` folder they are stored there under the
+    SHA-256 of the mesh, its regions, the station's hole and frame, the distances and the source
+    of the code that finds them (:func:`samples_fingerprint`), so a repeated study locates none.
+    """
+    from femstudy.fe.kept import read_store, write_store
     from femstudy.hole.probe import MeshLocator
 
+    path = None if keep is None else Path(keep) / f"samples-{samples_fingerprint(system, station, distances_mm)}.npz"
+    names = [f"{part}_{i}" for i in range(len(distances_mm)) for part in ("points", "element", "wall")]
+    stored = None if path is None else read_store(path, names, "sample points")
+    if stored is not None:
+        kept = tuple(DistanceSamples(float(d), stored[f"points_{i}"], stored[f"element_{i}"], stored[f"wall_{i}"])
+                     for i, d in enumerate(distances_mm))
+        if all(_placed(system, station, found) for found in kept):
+            return kept
+        log.warning("ignoring kept sample points %s: they fail the check against this mesh and hole", path)
     locator = MeshLocator(system)
     out = []
     for delta in distances_mm:
@@ -173,7 +192,51 @@ def distance_samples(system, station, distances_mm) -> tuple[DistanceSamples, ..
         element = locator.locate(samples.points)[0]
         inside = element >= 0
         out.append(DistanceSamples(float(delta), samples.points[inside], element[inside], samples.of("wall")[inside]))
+    if path is not None:
+        write_store(path, "sample points", **{f"{part}_{i}": getattr(found, part) for i, found in enumerate(out)
+                                              for part in ("points", "element", "wall")})
     return tuple(out)
+
+
+def _placed(system, station, found: DistanceSamples) -> bool:
+    """Kept sample points are what :func:`distance_samples` would give: each at its distance
+    from the hole and inside its element (to round-off)."""
+    from femstudy.hole.probe import BOUNDARY_TOLERANCE, reference_coordinates
+
+    n = len(found.points)
+    if found.points.shape != (n, 3) or found.element.shape != (n,) or found.wall.shape != (n,) \
+            or found.wall.dtype != bool or not np.issubdtype(found.element.dtype, np.integer):
+        return False
+    if n == 0:
+        return True
+    if found.element.min() < 0 or found.element.max() >= system.n_tets:
+        return False
+    at_distance = np.abs(hole_distance(station, found.points) - found.distance_mm) <= 1e-9 * (1 + found.distance_mm)
+    inside = reference_coordinates(system, found.element, found.points)[2] >= -BOUNDARY_TOLERANCE
+    return bool(at_distance.all() and inside.all())
+
+
+def samples_fingerprint(system, station, distances_mm) -> str:
+    """SHA-256 (32 hex digits) of what :func:`distance_samples` reads: the mesh's points,
+    tetrahedra and regions, the station's hole (radius, point angle, top, corner and tip depths)
+    and frame, the distances, and the source of the modules that place and locate the points."""
+    import hashlib
+    import inspect
+
+    from femstudy.hole import probe, samples
+
+    hole = station.hole
+    digest = hashlib.sha256()
+    for module in (samples, probe):
+        digest.update(inspect.getsource(module).encode())
+    digest.update(inspect.getsource(distance_samples).encode())
+    scalars = [hole.radius_mm, hole.point_angle_deg, hole.hole_top_mm, station.corner_depth_mm, station.tip_depth_mm]
+    for array in (system.mesh.p, system.mesh.t, system.region, np.array(scalars, float), hole.frame.origin,
+                  hole.frame.axis, hole.frame.e1, hole.frame.e2, np.asarray(distances_mm, float)):
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.dtype.str}{array.shape}".encode())
+        digest.update(array.data)
+    return digest.hexdigest()[:32]
 
 
 def distance_measures(system, station, u: np.ndarray, distances_mm, long_axis, loadings=("dynamic",),

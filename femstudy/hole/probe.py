@@ -74,7 +74,7 @@ class PointProbe:
         return self._apply(self.stress_operator, u, 6)
 
 
-def _reference_coordinates(system, element: np.ndarray, points: np.ndarray, inverse: np.ndarray | None = None):
+def reference_coordinates(system, element: np.ndarray, points: np.ndarray, inverse: np.ndarray | None = None):
     """ξ (n, 3), J⁻¹ (n, 3, 3) and the smallest barycentric coordinate of each point in ``element``
     (``inverse``: every element's J⁻¹, when already computed)."""
     mesh = system.mesh
@@ -150,7 +150,7 @@ class MeshLocator:
         return out
 
     def _coordinates(self, element: np.ndarray, points: np.ndarray):
-        return _reference_coordinates(self.system, element, points, self._inverse)
+        return reference_coordinates(self.system, element, points, self._inverse)
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n,) the cell nearest each point (n, 3) [mm] and (n, 3) the nearest point on it."""
@@ -192,7 +192,7 @@ def point_probe(system, points: np.ndarray, element: np.ndarray | None = None,
         element, xi, invJ = (locator or MeshLocator(system)).locate(points)
     else:
         element = np.asarray(element, dtype=np.int64)
-        xi, invJ, _ = _reference_coordinates(system, element, points)
+        xi, invJ, _ = reference_coordinates(system, element, points)
     inside = element >= 0
     if (~inside).any():
         log.debug("%d of %d probe points lie outside the mesh", np.sum(~inside), len(points))

@@ -410,7 +410,8 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
     solver : str
         Linear solver of the local models.
     keep : Path, optional
-        Folder of kept solutions for the local models (:func:`femstudy.fe.factorize`).
+        Folder of kept solutions for the local models (:func:`femstudy.fe.factorize`) and of their
+        sample points (:func:`femstudy.hole.measures.distance_samples`).
     site : HoleSite, optional
         The geometry (:func:`hole_site`) when already built, e.g. for another refinement.
     stations : tuple of int, optional
@@ -464,7 +465,7 @@ def hole_stresses(inputs: HoleInputs, femur, system, unit_fields: np.ndarray, op
         cut = cut_boundary(system, fields, local, station, locator=global_locator)
         patterns = np.hstack([hole_loads(local, station, growth_exponent=inputs.growth_exponent,
                                          cone_traction=traction).patterns for traction in tractions])
-        samples = distance_samples(local, station, options.distances_mm)
+        samples = distance_samples(local, station, options.distances_mm, keep)
         excluded = _excluded(local, cut.dofs, heights, up, inputs.clamp_length_mm, options.cut_margin_mm)
         # (patch thrust, torque) on the cut faces and the 4 hole loads (HoleLoads.force order), per loading
         dynamic = np.array([F_cut + F_evac, T_cut + T_evac, F_cut, T_cut, T_evac, F_evac])
