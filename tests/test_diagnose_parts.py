@@ -8,6 +8,7 @@ import pytest
 from femstudy.diagnosis.band import make_band, white_noise_sigma
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.diagnose import align, build_problem
+from femstudy.diagnosis.prepare import LOADED_EDGE_MARGIN_S
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.drilling.history import DrillingConditions
 from femstudy.recordings import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, ThermalSoftening, synthesize
@@ -80,6 +81,19 @@ def test_trace_that_ends_loaded_limits_the_comparison_to_its_span():
     assert trace.span() == (-math.inf, pytest.approx(sim.time_s[cut][-1]))
     problem, notes = build_problem(rec, trace, 6.0)
     assert problem.band.t_dec[-1] <= 5.0 and "compared over" in notes[0]
+
+
+def test_a_trace_that_starts_at_contact_already_loaded_is_compared_from_its_start():
+    """A simulation written from the instant of contact carries load in its first sample; the
+    comparison starts LOADED_EDGE_MARGIN_S after it (it was refused: its contact lay before)."""
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), None, None, None, None), approach_s=1.0)
+    sim = synthesize(1.5, 1500, effects=Effects.none(), approach_s=1.0)
+    after = sim.time_s >= 1.2  # the first sample already loaded
+    trace = TraceSimulation(sim.time_s[after], sim.thrust_N[after], sim.torque_Nmm[after], 1500)
+    assert not trace.zero_before and trace.contact_s == pytest.approx(sim.time_s[after][0])
+    problem, notes = build_problem(rec, trace, 6.0)
+    assert problem.band.t_dec[0] >= trace.contact_s + LOADED_EDGE_MARGIN_S - 1e-9
+    assert any("compared over" in n for n in notes)
 
 
 def test_a_simulation_outside_the_recording_is_refused():

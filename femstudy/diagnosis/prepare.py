@@ -53,7 +53,9 @@ def build_problem(recording: Recording, simulation, cortex_mm: float) -> tuple[P
     start, end = max(t[0], lo + LOADED_EDGE_MARGIN_S), min(t[-1], hi - LOADED_EDGE_MARGIN_S)
     if start > t[0] or end < t[-1]:
         notes.append(f"compared over {start:.3f}-{end:.3f} s, where the simulation has loads on both sides")
-    require(end - start > 1.0 and start <= simulation.contact_s <= end,
+    # a trace that starts loaded starts at its contact (its first sample), before the window
+    reaches_contact = start <= simulation.contact_s <= end or not getattr(simulation, "zero_before", True)
+    require(end - start > 1.0 and reaches_contact,
             f"the simulation (contact at {simulation.contact_s:.3f} s) does not overlap recording {recording.name} "
             f"({t[0]:.3f}-{t[-1]:.3f} s); it must cover the cut on the recording's clock")
     band = make_band(t, recording.spindle_rpm, start, end)
