@@ -2,8 +2,10 @@
 
     PYTHONPATH=. python bench/diagnose.py --seed 2 --per-class 6 --independent-per-class 4
 
+(The form-randomised benchmark with held-out forms is ``python -m bench.formbench.run``.)
+
 1. **femstudy's own generator** (``--generator femstudy``): each case is drawn by
-   :func:`tests.diagnosis_cases.make_case` (classes and ranges are in that module's docstring)
+   :func:`bench.synthetic_cases.make_case` (classes and ranges are in that module's docstring)
    from the seed; one in five has no torque channel ("no-T"), and one in three is diagnosed
    against the load model (``--model``, cut detected on the recording) instead of the simulated
    trace ("model"). Prints one line per case, then precision / recall / F1 per mechanism, the
@@ -23,7 +25,6 @@ on a shared machine.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -31,11 +32,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from femstudy.diagnosis import MECHANISMS, inputs  # noqa: E402
+from bench.synthetic_cases import CLASSES, make_case  # noqa: E402
+from femstudy.diagnosis import MECHANISMS, diagnose, inputs  # noqa: E402
 from femstudy.diagnosis.baseline import TraceSimulation  # noqa: E402
-from femstudy.diagnosis.diagnose import diagnose  # noqa: E402
 from femstudy.drilling.friction import load_bone_set  # noqa: E402
-from tests.diagnosis_cases import CLASSES, make_case  # noqa: E402
 
 BONE = load_bone_set("bovine")
 
@@ -63,7 +63,7 @@ def run_case(kind: str, seed: int, torque: bool, model: bool, duration_s: float 
         sim, cortex, _ = inputs.model_simulation(rec, case.simulation_model, BONE, None)
     else:
         sim, cortex = TraceSimulation.from_recording(case.simulation, rec.spindle_rpm), rec.metadata["cortex_mm"]
-    d = diagnose(rec, sim, float(cortex), BONE, workers=os.cpu_count() or 1)
+    d = diagnose(rec, sim, float(cortex), BONE)
     return case, d, time.perf_counter() - start
 
 
@@ -115,7 +115,7 @@ def run_femstudy(args: argparse.Namespace) -> None:
             seed = args.seed * 100_000 + k * 1000 + i
             case, d, seconds = run_case(kind, seed, torque=(i % 5 != 4), model=(i % 3 == 2))
             found = d.subset
-            fit = d.to_json()["fit"]  # the thrust channel's scores
+            fit = d.to_json()["fit"]
             rec = case.recording
             rows.append((case, found, fit, seconds, rec.duration_s, rec.sample_rate_hz, d))
             show = lambda s: "+".join(sorted(SHORT[m] for m in s)) or "-"
@@ -149,7 +149,7 @@ def run_femstudy(args: argparse.Namespace) -> None:
     for true_key, mech, key in RECOVERED:
         errors = []
         for case, found, fit, *_, d in rows:
-            reported = {m.mechanism: m.parameters for m in d.mechanisms}.get(mech, {})
+            reported = {m["mechanism"]: m["parameters"] for m in d.to_json()["missing_physics"]}.get(mech, {})
             if true_key in case.true and key in reported and mech in case.truth:
                 if true_key == "mu_f" and case.recording.torque_Nmm is None:
                     continue  # without torque μ_f rests on the bone set's μ_w

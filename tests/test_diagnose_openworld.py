@@ -57,4 +57,5 @@ def test_late_clogging_is_named_and_predicts_held_out_blocks(folder):
     _, js = run("late_clogging", 0, folder)
     assert {m["mechanism"] for m in js["missing_physics"]} == {"chip_clogging"}
     thrust = js["fit"]["channels"]["thrust_N"]
-    assert thrust["improved"]["r2_heldout"] > 0.99 > thrust["baseline"]["r2_heldout"]
+    # a block held out leaves the flexible monotone rise free to take any monotone path through it
+    assert thrust["improved"]["r2_heldout"] > 0.95 and thrust["baseline"]["r2_heldout"] < 0.7

@@ -54,7 +54,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.table:
         outcomes = [Outcome(o["case"], o["refused"], o["named"], o["unexplained"], None, o["seconds"],
-                            o.get("cpu_seconds", float("nan")))
+                            o.get("cpu_seconds", float("nan")), o.get("evidence"))
                     for path in args.table for o in json.loads(path.read_text())]
         print(summary(outcomes))
         print()
@@ -71,7 +71,7 @@ def main() -> int:
             args.save.parent.mkdir(parents=True, exist_ok=True)
             args.save.write_text(json.dumps([{"case": o.case, "refused": o.refused, "named": o.named,
                                               "unexplained": o.to_json()["unexplained"], "seconds": o.seconds,
-                                              "cpu_seconds": o.cpu_seconds}
+                                              "cpu_seconds": o.cpu_seconds, "evidence": o.evidence}
                                              for o in outcomes], indent=1))
     return 0
 

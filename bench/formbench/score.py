@@ -47,6 +47,7 @@ class Outcome:
     result: dict | None
     seconds: float
     cpu_seconds: float = float("nan")
+    evidence: dict | None = None  # mechanism -> the evidence its confidence rests on
 
     @property
     def decoy(self) -> dict | None:
@@ -95,7 +96,8 @@ def diagnose_case(truth_path: Path) -> Outcome:
         return Outcome(case, stderr.getvalue().strip() or f"exit {status}", {}, [], None, seconds, cpu)
     result = json.loads(out.read_text())
     named = {m["mechanism"]: float(m.get("confidence", 1.0)) for m in result.get("missing_physics", [])}
-    return Outcome(case, None, named, list(result.get("unexplained", [])), result, seconds, cpu)
+    evidence = {m["mechanism"]: m.get("evidence", {}) for m in result.get("missing_physics", [])}
+    return Outcome(case, None, named, list(result.get("unexplained", [])), result, seconds, cpu, evidence)
 
 
 def _short(names) -> str:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 from pathlib import Path
 
 from femstudy.commands.metadata import add_metadata_options, parse_settings
@@ -39,8 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write report.md, overlay.png, residuals.png and diagnosis.json to DIR")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the overlay and residual figure")
-    p.add_argument("--workers", type=number(1, 256, integer=True, low_open=False), default=os.cpu_count() or 1,
-                   help="processes for the independent fits (default: every core; the result is the same)")
+    # each fit takes milliseconds and the diagnosis runs in one process; the option of earlier
+    # versions is still accepted so that scripts passing it keep working
+    p.add_argument("--workers", type=number(1, 256, integer=True, low_open=False), default=1, help=argparse.SUPPRESS)
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
 
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         check_recording_size(path, MAX_ANALYSED_SAMPLES, "diagnose")
     d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
                  columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
-                 bone_library=args.settings.bones_dir, workers=args.workers)
+                 bone_library=args.settings.bones_dir)
     _require_finite(d.to_json(), args.recording.name)
     print(d.summary())
     for path in d.write(args.json, args.plot, args.report):

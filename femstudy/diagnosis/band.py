@@ -9,9 +9,9 @@ one linear operator, the Gaussian-weighted mean at decimated instants t_j,
 with q_i the trapezoid weights of the samples. Because w is a continuous kernel, the recording
 at its own samples and a model on any finer grid pass through the same low-pass, gain
 exp(−2π² σ_g² f²). σ_g = max(35 ms, 0.6 / f_spindle) makes the gain ≤ 1e-3 at the spindle
-frequency. The instants are Δ = 3.5 σ_g apart, where smoothed white noise has a correlation of
-only exp(−Δ²/4σ_g²) = 0.047 between neighbours, so they count as n_eff = n / (1 + 2·0.047)
-independent samples.
+frequency. The instants are Δ = ``STEP_SIGMAS`` σ_g apart; smoothed white noise correlates by
+exp(−Δ²/4σ_g²) between neighbours (without the fitted noise model they count as
+n_eff = n / (1 + 2ρ) independent samples).
 
 Noise level: the white part of the raw residual (recording − simulation) is the level of its
 Welch power spectral density between ``NOISE_BAND_LOW_HZ`` and 0.4 × the sampling rate:
@@ -31,8 +31,13 @@ from scipy import signal, sparse
 
 #: Smallest Gaussian width [s]: keeps the band up to ~3 Hz (gain 0.8 at 3 Hz).
 MIN_SIGMA_S = 0.035
-#: Decimation step in Gaussian widths; neighbours then correlate by exp(−3.5²/4) = 0.047.
-STEP_SIGMAS = 3.5
+#: Decimation step in Gaussian widths. At the instants' Nyquist frequency 1/2Δ the smoothing passes
+#: exp(−π²/2(Δ/σ)²): 0.29 at 2σ (at 3.5σ it passed 0.67, so a sharp periodic load's harmonics
+#: aliased onto slow trends). Neighbours correlate by exp(−Δ²/4σ²) = 0.37; the noise model's
+#: whitening takes that into account.
+STEP_SIGMAS = 2.0
+#: Width of an independent step [Gaussian widths], for the shortest window that can be diagnosed.
+INDEPENDENT_SIGMAS = 3.5
 #: Fewest analysis instants of a window.
 MIN_INSTANTS = 40
 #: Kernel support in Gaussian widths (weights beyond are below 4e-6 of the peak).

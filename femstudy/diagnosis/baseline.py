@@ -11,9 +11,8 @@ feed stops at ``stop_s``; then the loads vanish. The diagnosis maps the recordin
   because then zero is what it means (the drill is off the bone); otherwise the diagnosis is
   restricted to the span it covers. Its contact is where its first loaded samples extrapolate
   to zero (the entry ramp is linear in depth), its stop the deepest point of its ``depth_mm``
-  column, or else one spindle revolution before its loads vanish for good (the generator's
-  and the rig's convention: loads fall to zero within one revolution once the feed stops),
-  the vanishing point extrapolated from the last sample above 1 % of the peak.
+  column, or else where its final fall begins (the loads follow the feed per revolution down
+  within a revolution or a few once the feed stops, :func:`_final_fall`).
 - :class:`ModelSimulation`: a load model of :mod:`femstudy.drilling.history` for the
   recording's feed, speed, drill and cortex, started at the recording's contact and stopped at
   a depth that the fit adjusts (the stop of a real rig is not at a known depth).
@@ -23,16 +22,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from femstudy.drilling.history import DrillingConditions, evaluate
 from femstudy.errors import require
 
+if TYPE_CHECKING:
+    from femstudy.diagnosis.timing import TraceEvents
+
 #: A trace is "unloaded" at an edge when |thrust| there is below this fraction of its peak.
 UNLOADED = 0.01
 #: Loads below this fraction of the peak count as zero when contact and stop are located.
 NONZERO = 1e-6
+#: The final fall of a trace: the thrust falls by more than this share of itself per revolution
+#: (:func:`_final_fall`).
+FALL_RATE = 0.3
+#: A trace whose first load is below this fraction of its peak, and which rises after it, starts at
+#: contact (a finite first load is the chisel edge's or the first lip element's): before it, zero.
+STARTS_AT_CONTACT = 0.25
+#: A trace that ends loaded, below this fraction of its peak and after falling from it (in
+#: cancellous bone past breakthrough), ends at its feed stop: the loads vanish one revolution later.
+ENDS_AT_STOP = 0.4
 
 
 def _zero_crossing(t: np.ndarray, F: np.ndarray, k: int, side: int) -> float:
@@ -44,6 +56,20 @@ def _zero_crossing(t: np.ndarray, F: np.ndarray, k: int, side: int) -> float:
     crossing = t[k] - F[k] * (t[inner] - t[k]) / (F[inner] - F[k])
     lo, hi = sorted((float(t[k]), float(t[k + side])))
     return float(np.clip(crossing, lo, hi))
+
+
+def _final_fall(t: np.ndarray, F: np.ndarray, peak: float, revolution_s: float) -> float:
+    """Where the trace's final fall begins: going back from where the loads vanish, the first
+    instant the thrust no longer falls by ``FALL_RATE`` of itself per revolution. Once the feed
+    stops the loads follow the feed per revolution down within a revolution or a few (femstudy's
+    load models in one, linearly; a lagged chip thickness exponentially); a breakthrough's fall
+    takes the cone's exit time l/f, far longer, and is not taken for it."""
+    k = int(np.flatnonzero(F > UNLOADED * peak)[-1])
+    slope = np.gradient(F, t)
+    i = k
+    while i > 0 and slope[i - 1] < -FALL_RATE * max(F[i - 1], UNLOADED * peak) / revolution_s:
+        i -= 1
+    return float(t[i])
 
 
 def _fall(tau, stop_s: float, spindle_rpm: float):
@@ -62,7 +88,7 @@ class TraceSimulation:
     depth_mm: np.ndarray | None = None
     label: str = "simulation"
     note: str = ""               # how the trace was placed on the recording's clock, if it was
-    events: object = None        # timing.TraceEvents once known (contact, breakthrough, cortex)
+    events: "TraceEvents | None" = None   # once known (contact, breakthrough, cortex)
 
     def __post_init__(self) -> None:
         t, F = self.time_s, np.abs(self.thrust_N)
@@ -72,23 +98,24 @@ class TraceSimulation:
         self.zero_after = bool(F[-1] <= UNLOADED * peak)
         loaded = np.flatnonzero(F > NONZERO * peak)
         self.contact_s = _zero_crossing(t, F, loaded[0], -1) if self.zero_before else float(t[0])
+        if not self.zero_before and F[0] <= STARTS_AT_CONTACT * peak and F[: max(t.size // 4, 2)].max() > 2 * F[0]:
+            self.zero_before = True   # it starts at contact: the drill was in air before
         if self.depth_mm is not None and np.ptp(self.depth_mm) > 0:
             self.stop_s = float(t[int(np.argmax(self.depth_mm))])
         elif self.zero_after:
-            # where the final fall reaches zero, extrapolated from its last sample above 1 % of
-            # the peak (a lagged fall has a long tail below that), one revolution after the stop
-            k = int(np.flatnonzero(F > UNLOADED * peak)[-1])
-            last = int(loaded[-1]) + 1 if loaded[-1] + 1 < t.size else int(loaded[-1])
-            if k > 0 and F[k - 1] != F[k]:
-                vanish = float(np.clip(t[k] - F[k] * (t[k - 1] - t[k]) / (F[k - 1] - F[k]), t[k], t[last]))
-            else:
-                vanish = float(t[last])
-            self.stop_s = vanish - 60.0 / self.spindle_rpm
+            self.stop_s = _final_fall(t, F, peak, 60.0 / self.spindle_rpm)
+        elif F[-1] <= ENDS_AT_STOP * peak and F[-1] < (1 - ENDS_AT_STOP) * float(F[loaded[0]:].max()):
+            # it ends after the loads fell (breakthrough into cancellous bone): at the feed stop,
+            # where the loads vanish within one revolution
+            self.stop_s = float(t[-1])
+            self.ends_at_stop = True
+            self.zero_after = True
         else:
             self.stop_s = math.inf
         self.stop_s = max(self.stop_s, self.contact_s)
 
     stop_is_parameter = False
+    ends_at_stop = False
 
     @classmethod
     def from_recording(cls, rec, spindle_rpm: float) -> "TraceSimulation":
@@ -108,10 +135,14 @@ class TraceSimulation:
     def loads(self, tau: np.ndarray, stop_s: float | None = None):
         """Thrust [N] and torque [N·mm] (or None) at simulation times τ."""
         left = 0.0 if self.zero_before else None
-        right = 0.0 if self.zero_after else None
+        right = 0.0 if self.zero_after and not self.ends_at_stop else None
         F = np.interp(tau, self.time_s, self.thrust_N, left=left, right=right)
         T = None if self.torque_Nmm is None else np.interp(tau, self.time_s, self.torque_Nmm,
                                                            left=left, right=right)
+        if self.ends_at_stop:
+            fall = _fall(tau, float(self.time_s[-1]), self.spindle_rpm)
+            F = F * fall
+            T = None if T is None else T * fall
         return F, T
 
 

@@ -1,22 +1,23 @@
-"""Diagnose one recording against one simulation: locate, explain, model, show the improvement.
+"""Diagnose one recording against one simulation: locate, name, fit, show the improvement.
 
 Steps (each in its module): the inputs, with timing and geometry from the simulation
-(:mod:`.inputs`, :mod:`.timing`); the analysis band, the alignment and the fitted noise model
-(:mod:`.prepare`, :mod:`.noise`); the mismatch intervals of the aligned simulation
-(:mod:`.locate`); fits of every subset of the four mechanisms (:mod:`.fit`); selection
-(:mod:`.select`); what the best model leaves unexplained and the confidences
-(:mod:`.openworld`, :mod:`.verdict`); held-out R² (:mod:`.heldout`); the physical reading
-of the named parameters (:mod:`.explain`).
+(:mod:`.inputs`, :mod:`.timing`); the channels checked against the simulation (:mod:`.sanity`);
+the analysis band, the robust alignment, the events in air and the noise model fitted there
+(:mod:`.prepare`, :mod:`.air`, :mod:`.noise`); the mismatch of the aligned simulation
+(:mod:`.locate`); every subset of the catalogue (:mod:`.catalogue`) fitted with shape-flexible
+forms (:mod:`.search`, :mod:`.fit`); selection by information, size, signatures and held-out
+prediction (:mod:`.select`); shapes outside the catalogue competing and characterising the rest
+(:mod:`.verdict`, :mod:`.outside`); confidence (:mod:`.confidence`); held-out R² (:mod:`.heldout`).
 
-Calibration: when the selected model still leaves more than noise (χ² test p ≤ RESIDUAL_P)
-and a scale on the modelled loads would explain part of what it, or the simulation alone,
-leaves (:func:`scale_helps`; a mechanism fitted first can absorb most of a scale error),
-everything is refitted with a scale on each channel's simulated cutting load (a simulation
-whose cutting energy is off by a few percent is otherwise "explained" by softening or
-clogging). The rescaled family is kept when its selected model has a BIC lower by
-MIN_DELTA_BIC, on the data's own noise level. The scale is not admitted from the start
-because it makes slow softening and clogging nearly interchangeable (both are close to
-linear in time over a cut, and the scale removes the anchor the initial force provides).
+Calibration: when the selected model still leaves more than noise (χ² test p ≤ RESIDUAL_P) and a
+scale on the modelled loads would explain part of what it, or the simulation alone, leaves
+(:func:`scale_helps`), everything is refitted with a scale on each channel's simulated cutting load
+(a simulation whose cutting energy is off by a few percent is otherwise "explained" by softening
+or clogging). The rescaled family is kept when its selected model has a BIC lower by
+MIN_DELTA_BIC on the data's own noise level and leaves no more than noise: a scale that does not
+explain the recording is not let take the place of a fast softening. Two channels that need scales differing by more than
+``CHANNEL_SCALE`` are a finding about the channels (a cross-talk or a calibration), reported, not
+absorbed.
 """
 
 from __future__ import annotations
@@ -25,162 +26,170 @@ import logging
 import math
 import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
-from femstudy.diagnosis import explain, heldout, inputs, openworld, report
+from femstudy.diagnosis import heldout, inputs, outside, prepare, sanity
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
-from femstudy.diagnosis.findings import ChannelFit, MismatchInterval, Scores, Timing, TraceEventTimes
-from femstudy.diagnosis.fit import Fit, fit_all, fit_each, seeds
+from femstudy.diagnosis.catalogue import MECHANISMS
+from femstudy.diagnosis.confidence import Evidence, confidence
+from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.locate import mismatch_intervals
-from femstudy.diagnosis.mechanisms import Problem
-from femstudy.diagnosis.prepare import align, build_problem, cut_window, restate, with_noise
-from femstudy.diagnosis.result import DiagnosisResult
-from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Selection, select
+from femstudy.diagnosis.model import Spec, evaluate, layout
+from femstudy.diagnosis.problem import Problem
+from femstudy.diagnosis.result import (ChannelFit, ChannelNoise, Diagnosis, Mismatch, Named, ResidualCheck, Scores,
+                                       Timing)
+from femstudy.diagnosis.search import bic, fit_all
+from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, residual_test, select
 from femstudy.diagnosis.verdict import decide
-from femstudy.diagnosis.workers import fitter
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
 from femstudy.recordings.reader import Recording, read_recording
 
 logger = logging.getLogger(__name__)
 
-
-@dataclass(frozen=True)
-class Diagnosis(DiagnosisResult):
-    """The result of :func:`diagnose`: everything ``femstudy diagnose`` reports (the fields are
-    :class:`.result.DiagnosisResult`'s).
-
-    :meth:`to_json` is the JSON contract (docs/diagnosis.md), :meth:`summary` the printed
-    text and :meth:`write` the files.
-    """
-
-    def summary(self) -> str:
-        """The printed summary (inputs, noise, timing, mechanisms, unexplained, fit, residual test)."""
-        return report.summary_text(self)
-
-    def write(self, json_path=None, plot_path=None, report_dir=None) -> list[Path]:
-        """Write the JSON contract, the overlay/residual figure and the report folder (report.md,
-        overlay.png, residuals.png, diagnosis.json), each atomically; returns what was written.
-
-        Examples
-        --------
-        >>> d.write(json_path="d.json", report_dir="report")  # doctest: +SKIP
-        [PosixPath('d.json'), PosixPath('report/report.md')]
-        """
-        written = []
-        if json_path is not None:
-            report.write_json(json_path, self)
-            written.append(Path(json_path))
-        if plot_path is not None:
-            report.plot(plot_path, self)
-            written.append(Path(plot_path))
-        if report_dir is not None:
-            report.write_report(report_dir, self, self.summary())
-            written.append(Path(report_dir) / "report.md")
-        return written
-
-
-def summarise_fit(problem: Problem, baseline: Fit, improved: Fit, fits_of=fit_each) -> dict[str, ChannelFit]:
-    """R² and RMSE of the smoothed recording over the cutting phase, per channel: in-sample
-    (``r2``) and held out (``r2_heldout``, blocked folds, :mod:`.heldout`)."""
-    window = cut_window(problem, baseline)
-    if np.count_nonzero(window) < 3:
-        window = np.ones_like(window)
-    predictions = {label: heldout.held_out_predictions(problem, fit, window, fits_of)
-                   for label, fit in (("baseline", baseline), ("improved", improved))}
-    out = {}
-    t = problem.band.t_dec[window]
-    for c, name in enumerate(problem.channels):
-        y = problem.y[c, window]
-        scores = {}
-        for label, fit in (("baseline", baseline), ("improved", improved)):
-            r = y - fit.model[c, window]
-            scores[label] = Scores(round(heldout.r2(y, fit.model[c, window]), 4),
-                                   round(heldout.r2(y, predictions[label][c, window]), 4),
-                                   round(float(np.sqrt(np.mean(r ** 2))), 4))
-        out[name] = ChannelFit(scores["baseline"], scores["improved"], (round(float(t[0]), 3), round(float(t[-1]), 3)))
-    return out
-
-
-def fit_and_select(problem: Problem, start_params: dict, fits_of=fit_each) -> tuple[dict, Selection]:
-    """Every subset fitted from the seeds and the aligned parameters, then selected."""
-    fits = fit_all(problem, start_params, seeds(problem, start_params), fits_of)
-    return fits, select(problem, fits, fits_of)
-
-
 #: Least scale error (fraction) for which the calibrated family is fitted.
 MIN_SCALE_ERROR = 0.01
+#: Channels whose calibration scales differ by more than this (fraction) are a channel finding.
+CHANNEL_SCALE = 0.05
 
 
-def scale_helps(problem: Problem, fit: Fit, inflation: np.ndarray) -> bool:
-    """Whether a scale on each channel's modelled load explains the residual of ``fit``: BIC
-    gain (GLS, misfit-inflated) of at least ``MIN_DELTA_BIC`` and a scale error of at least
+def robust_baseline(problem: Problem, alignment: prepare.Alignment) -> Fit:
+    """The simulation as given, robustly aligned (:func:`.prepare.align`), as a fit."""
+    spec = Spec()
+    lay = layout(problem, spec)
+    theta = lay.start.copy()
+    for k, c in enumerate(problem.channels):
+        theta[lay.index(f"{c}_tare")] = alignment.tares[k]
+    ev = evaluate(problem, spec, lay, theta)
+    chi2 = np.array([float(np.sum(problem.whiten(c, problem.y[c] - ev.model[c], problem.usable) ** 2))
+                     for c in range(len(problem.channels))])
+    return Fit(spec, lay, theta, chi2, ev.model, float(len(problem.channels) + 1), ev)
+
+
+def scale_helps(problem: Problem, f: Fit, inflation: np.ndarray) -> bool:
+    """Whether a scale on each channel's modelled load explains the residual of ``f``: BIC gain
+    (GLS, misfit-inflated) of at least ``MIN_DELTA_BIC`` and a scale error of at least
     ``MIN_SCALE_ERROR`` in some channel."""
-    _, loads = openworld.modelled_loads(problem, fit.params)
-    columns = problem.band.smooth_model(np.vstack(loads))
+    columns = problem.band.smooth_model(f.evaluation.loads)
     gain, big = 0.0, False
+    rows = problem.usable
     for c in range(len(problem.channels)):
-        x = problem.whiten(c, columns[c])
-        r = problem.whiten(c, problem.y[c] - fit.model[c])
+        x = problem.whiten(c, columns[c], rows)
+        r = problem.whiten(c, problem.y[c] - f.model[c], rows)
         norm = float(x @ x)
         if norm <= 0:
             continue
         gain += float(x @ r) ** 2 / norm / inflation[c]
         big = big or abs(float(x @ r) / norm) >= MIN_SCALE_ERROR
-    return big and gain - len(problem.channels) * math.log(problem.y.size) >= MIN_DELTA_BIC
+    return big and gain - len(problem.channels) * math.log(problem.n) >= MIN_DELTA_BIC
 
 
-def plain_bic(problem: Problem, fit: Fit) -> float:
-    """BIC on the data's own noise level (no misfit inflation), comparable across calibrations."""
-    n_eff = problem.y.size * problem.n_eff_factor
-    return fit.chi2_total * problem.n_eff_factor + fit.n_params * math.log(n_eff)
-
-
-def _simulation(recording: Recording, simulation, model: str | None, cortex_mm: float | None,
-                bone_set: BoneSet):
-    """The simulation on the recording's clock, the cortex [mm], a label and notes."""
+def _simulation(recording: Recording, simulation, model: str | None, cortex_mm: float | None, bone_set: BoneSet):
+    """The simulation on the recording's clock, the recording with its channels checked, the cortex
+    [mm], a label, notes and the channel findings."""
     if simulation is None:
         require(model is not None, "give a simulation (a trace file) or a load model to diagnose against")
+        findings = sanity.polarity_from_excursion(recording)
+        if findings:
+            recording = replace(recording, thrust_N=-recording.thrust_N)
         sim, cortex, notes = inputs.model_simulation(recording, model, bone_set, cortex_mm)
         label = f"load model '{model}' (bone set '{bone_set.name}'), contact at {sim.contact_s:.3f} s"
-        return sim, cortex, label, notes
+        return sim, recording, cortex, label, notes, findings
     if isinstance(simulation, ModelSimulation):
-        return simulation, float(cortex_mm or simulation.conditions.cortex_mm), f"load model '{simulation.model}'", []
+        return (simulation, recording, float(cortex_mm or simulation.conditions.cortex_mm),
+                f"load model '{simulation.model}'", [], [])
     if isinstance(simulation, (str, os.PathLike)):
-        sim = inputs.read_simulation(simulation, recording)
+        raw = inputs.read_trace(simulation, recording)
         label = os.path.basename(os.fspath(simulation))
     elif isinstance(simulation, Recording):
-        sim = inputs.with_events(inputs.on_recording_clock(
-            TraceSimulation.from_recording(simulation, recording.spindle_rpm), recording), recording)
+        raw = TraceSimulation.from_recording(simulation, recording.spindle_rpm)
         label = simulation.name
     else:
-        sim = simulation if simulation.events is not None else inputs.with_events(simulation, recording)
-        label = sim.label
+        raw = replace(simulation, events=None) if simulation.events is not None else simulation
+        label = simulation.label
+    sim, correlations = inputs.on_recording_clock(raw, recording)
+    recording, findings = sanity.check(recording, sim, correlations)
+    if findings:
+        sim, _ = inputs.on_recording_clock(raw, recording)
+    sim = inputs.with_events(sim, recording)
     cortex, notes = inputs.trace_cortex(sim, recording, cortex_mm)
-    return sim, cortex, label, notes
+    return sim, recording, cortex, label, notes, findings
 
 
 def _timing(problem: Problem, baseline: Fit, cortex_mm: float) -> Timing:
     sim = problem.simulation
-    shift = baseline.params["shift_s"]
+    shift = problem.shift_s + baseline.value("shift_correction_s")
     events = getattr(sim, "events", None)
     if events is not None:
-        on_clock = events.to_json(shift)
-        source = "the simulation's breakthrough" if events.cortex_mm is not None else "depth reached"
-        return Timing(on_clock["contact_s"], on_clock["feed_stop_s"], round(cortex_mm, 3),
-                      TraceEventTimes(on_clock["full_engagement_s"], on_clock["breakthrough_s"],
-                                      on_clock["depth_reached_mm"], source))
-    return Timing(round(sim.contact_s + shift, 4), round(sim.stop_s + shift, 4) if math.isfinite(sim.stop_s) else None,
-                  round(cortex_mm, 3))
+        e = events.to_json(shift)
+        return Timing(e["contact_s"], e["full_engagement_s"], e["breakthrough_s"], e["feed_stop_s"], cortex_mm,
+                      e["depth_reached_mm"],
+                      "the simulation's breakthrough" if events.cortex_mm is not None else "depth reached")
+    stop = problem.stop_s
+    return Timing(round(sim.contact_s + shift, 4), feed_stop_s=round(stop + shift, 4) if math.isfinite(stop) else None,
+                  cortex_mm=cortex_mm)
 
 
-def diagnose(recording, simulation=None, cortex_mm: float | None = None,
-             bone: str | BoneSet = "bovine", progress=None, *, model: str | None = None,
-             columns=None, overrides: dict | None = None, override_header: bool = False,
-             bone_library: Path | None = None, workers: int = 1) -> Diagnosis:
+def summarise_fit(problem: Problem, baseline: Fit, improved: Fit) -> tuple[ChannelFit, ...]:
+    """R² and RMSE of the smoothed recording over the cut, per channel, in sample and held out."""
+    window = prepare.cut_window(problem, problem.shift_s + baseline.value("shift_correction_s")) & problem.usable
+    if np.count_nonzero(window) < 3:
+        window = problem.usable.copy()
+    predictions = {"baseline": heldout.held_out_predictions(problem, baseline, window),
+                   "improved": heldout.held_out_predictions(problem, improved, window)}
+    t = problem.band.t_dec[window]
+    out = []
+    for c, name in enumerate(problem.channels):
+        y = problem.y[c, window]
+        scores = {}
+        for label, f in (("baseline", baseline), ("improved", improved)):
+            r = y - f.model[c, window]
+            scores[label] = Scores(round(heldout.r2(y, f.model[c, window]), 4),
+                                   round(heldout.r2(y, predictions[label][c, window]), 4),
+                                   round(float(np.sqrt(np.mean(r ** 2))), 4))
+        out.append(ChannelFit(name, scores["baseline"], scores["improved"], (round(float(t[0]), 3), round(float(t[-1]), 3))))
+    return tuple(out)
+
+
+def _excess(problem: Problem, f: Fit) -> float:
+    return max(f.chi2_total * problem.n_eff_factor - (problem.n * problem.n_eff_factor - f.n_params), 0.0)
+
+
+def _fit_and_select(problem: Problem, baseline: Fit):
+    fits = fit_all(problem, baseline)
+    return fits, select(problem, fits)
+
+
+def _channel_scale(problem: Problem, improved: Fit) -> list[outside.Unexplained]:
+    if not (problem.calibrate and problem.has_torque):
+        return []
+    g_F, g_T = improved.value("thrust_N_scale"), improved.value("torque_Nmm_scale")
+    if abs(g_T / g_F - 1) <= CHANNEL_SCALE:
+        return []
+    t = problem.band.t_dec
+    return [outside.Unexplained(float(t[0]), float(t[-1]), "torque_Nmm", "channel_scale",
+                                f"the torque reads {100 * (g_T / g_F - 1):+.0f} % against the thrust, relative to the "
+                                f"simulation: a cross-talk between the channels or a calibration of one of them, "
+                                f"not physics of the cut.", (("torque_over_thrust_scale", round(g_T / g_F, 4)),))]
+
+
+def _failed_signatures(problem: Problem, selection) -> list[outside.Unexplained]:
+    """What a significant mechanism dropped for a failed signature test shows instead, when the
+    test names it (:attr:`.catalogue.Check.finding`): over the compared window, both channels."""
+    t = problem.band.t_dec
+    return [outside.Unexplained(float(t[0]), float(t[-1]), "both", c.finding,
+                                f"{d.mechanism.replace('_', ' ')} is significant but not its signature: {c.text}.",
+                                ((c.name, round(float(c.value), 4)),))
+            for d in selection.dropped for c in d.failed if c.finding]
+
+
+def diagnose(recording, simulation=None, cortex_mm: float | None = None, bone: str | BoneSet = "bovine",
+             progress=None, *, model: str | None = None, columns=None, overrides: dict | None = None,
+             override_header: bool = False, bone_library: Path | None = None) -> Diagnosis:
     """Diagnose ``recording`` against a simulation (see the module docstring).
 
     Parameters
@@ -191,24 +200,30 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
     simulation : a simulated trace — a path in the recording format, a
         :class:`~femstudy.recordings.Recording`, or a :class:`.TraceSimulation` — or a
         :class:`.ModelSimulation`; None with ``model``.
-    cortex_mm : cortical thickness [mm]; default: the recording's header ``cortex_mm``, else
-        the simulation's breakthrough, else (no breakthrough) the depth reached, with a note.
-    bone : bone set (or its name, resolved in ``bone_library``) giving μ_w for the friction
-        reading of chip clogging without torque, and the friction of a load model.
+    cortex_mm : cortical thickness [mm]; default: the recording's header ``cortex_mm``, else the
+        simulation's breakthrough, else (no breakthrough) the depth reached, with a note.
+    bone : bone set (or its name, resolved in ``bone_library``) giving μ_w for the friction reading
+        of chip clogging without torque, and the friction of a load model.
     progress : optional callable taking one message per step (they also go to the logger).
-    model : "allotta" or "clogging": diagnose against that femstudy load model instead, started
-        at the recording's detected contact.
-    workers : processes for the independent fits (:mod:`.workers`); the result is the same.
+    model : "allotta" or "clogging": diagnose against that femstudy load model instead, started at
+        the recording's detected contact.
 
     Returns
     -------
     Diagnosis
 
-    Examples
-    --------
+    Example
+    -------
     >>> d = diagnose("rec.csv", "sim.csv")                           # doctest: +SKIP
     >>> d.to_json()["missing_physics"], d.to_json()["unexplained"]   # doctest: +SKIP
     """
+    with threadpool_limits(1):   # small matrices: BLAS threads only add overhead (3x on two busy cores)
+        return _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, overrides, override_header,
+                         bone_library)
+
+
+def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, overrides, override_header,
+              bone_library) -> Diagnosis:
     start = time.perf_counter()
 
     def say(message: str) -> None:
@@ -221,52 +236,77 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None,
         for note in recording.notes:
             say(note)
     bone_set = load_bone_set(bone, bone_library) if isinstance(bone, str) else bone
-    sim, cortex, label, notes = _simulation(recording, simulation, model, cortex_mm, bone_set)
+    sim, recording, cortex, label, notes, findings = _simulation(recording, simulation, model, cortex_mm, bone_set)
+    notes = list(recording.notes) + notes
     say(f"read {recording.name} ({recording.time_s.size} samples) and the simulation ({label})")
-    problem, more = build_problem(recording, sim, cortex)
-    notes = notes + more
-    baseline = align(problem)
-    problem, noise_models, noise_notes = with_noise(problem, baseline, recording)
-    notes += noise_notes
-    baseline = restate(problem, baseline)
-    say(f"{problem.band.t_dec.size} smoothed samples per channel ({', '.join(problem.channels)}); noise "
-        + ", ".join(f"{c} alpha {m.exponent:.2f}, corner {m.corner_hz:.3g} Hz" for c, m in noise_models.items()))
+    clipped, clip_findings = sanity.clipped(recording)
+    findings = findings + clip_findings
+    problem, more = prepare.smoothed(recording, sim, cortex)
+    notes += more
+    alignment = prepare.align(problem)
+    stretches = prepare.in_air(problem, alignment, recording, clipped)
+    problem, noise_models, noise_notes = prepare.with_noise(problem, alignment, recording, stretches)
+    notes += list(noise_notes)
+    baseline = robust_baseline(problem, alignment)
     residual = problem.y - baseline.model
-    mismatch = sorted((MismatchInterval(**interval) for c, name in enumerate(problem.channels)
-                       for interval in mismatch_intervals(
-                           problem.band.t_dec, residual[c] / problem.sigma[c], problem.n_eff_factor, name,
-                           chi2_of=lambda lo, hi, c=c: openworld.interval_chi2(problem, c, residual[c], lo, hi))),
-                      key=lambda i: (i.start_s, i.channel))
-    say(f"aligned (shift {baseline.params['shift_s'] * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s)")
-    with fitter(workers) as fits_of:
-        start_params = {k: baseline.params[k] for k in problem.nonlinear_names(frozenset())}
-        fits, selection = fit_and_select(problem, start_params, fits_of)
-        say(f"fitted {len(fits)} mechanism subsets")
-        if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
-                                                            for f in (fits[selection.subset], baseline)):
-            scaled = replace(problem, calibrate=True)
-            scaled_fits, scaled_selection = fit_and_select(scaled, start_params, fits_of)
-            if (plain_bic(scaled, scaled_fits[scaled_selection.subset])
-                    < plain_bic(problem, fits[selection.subset]) - MIN_DELTA_BIC):
-                problem, fits, selection = scaled, scaled_fits, scaled_selection
-            say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
-        verdict = decide(problem, fits, selection, baseline, fits_of)
-        improved = verdict.fit
-        span = openworld.cut_span(problem, improved.params)
-        model_thrust = problem.predict(improved.params, recording.time_s)["thrust_N"]
-        spindle = openworld.spindle_line(recording.time_s, recording.thrust_N, model_thrust, recording.spindle_rpm,
-                                         (span[0] + problem.geometry.cone_mm / problem.geometry.feed_mm_s, span[1]))
-        leftover = problem.y - improved.model
-        for s in verdict.shapes:
-            leftover = leftover - s.contribution()
-        _, loads = openworld.modelled_loads(problem, improved.params)
-        peaks = np.array([max(float(np.max(np.abs(L))), 1e-12) for L in loads])
-        unexplained = openworld.report(problem, list(verdict.shapes), leftover, spindle, span, peaks)
-        say(f"named {len(verdict.subset)} mechanism(s), {len(unexplained)} unexplained feature(s)")
-        bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
-        mechanisms = explain.mechanisms(problem, improved, selection, verdict, bone_mu_w)
-        summary = summarise_fit(problem, baseline, improved, fits_of)
+    t = problem.band.t_dec
+    mismatch = sorted((Mismatch(i["start_s"], i["end_s"], i["channel"], i["significance"], i["max_abs_z"])
+                       for c, name in enumerate(problem.channels)
+                       for i in mismatch_intervals(t, np.where(problem.usable, residual[c] / problem.sigma[c], 0.0),
+                                                   problem.n_eff_factor, name,
+                                                   chi2_of=lambda lo, hi, c=c: outside.interval_chi2(problem, c, residual[c], lo, hi))),
+                      key=lambda m: (m.start_s, m.channel))
+    say(f"aligned (shift {alignment.shift_s * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s); "
+        f"{len(stretches.events)} event(s) in air")
+    fits, selection = _fit_and_select(problem, baseline)
+    say(f"fitted {len(fits)} mechanism subsets")
+    if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
+                                                        for f in (fits[selection.subset], baseline)):
+        scaled = replace(problem, calibrate=True)
+        scaled_fits, scaled_selection = _fit_and_select(scaled, robust_baseline(scaled, alignment))
+        if (bic(scaled, scaled_fits[scaled_selection.subset]) < bic(problem, fits[selection.subset]) - MIN_DELTA_BIC
+                and scaled_selection.residual_p_value > RESIDUAL_P):
+            problem, fits, selection = scaled, scaled_fits, scaled_selection
+            baseline = robust_baseline(problem, alignment)
+        say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
+    verdict = decide(problem, fits, selection.subset, selection.inflation)
+    improved = verdict.fit
+    frame = improved.evaluation.frame
+    span = (frame.contact_t_s, min(frame.stop_t_s, float(t[-1])))
+    model_thrust = np.interp(recording.time_s, problem.band.t_model, improved.evaluation.grid[0])
+    spindle = outside.spindle_line(recording.time_s, recording.thrust_N, model_thrust, recording.spindle_rpm,
+                                   (span[0] + problem.geometry.cone_mm / problem.geometry.feed_mm_s, span[1]),
+                                   stretches.quiet)
+    leftover = problem.y - improved.model
+    for s in verdict.shapes:
+        leftover = leftover - s.contribution()
+    peaks = np.array([problem.peak(c) for c in range(len(problem.channels))])
+    unexplained = ([outside.Unexplained(f.start_s, f.end_s, f.channel, f.kind, f.description,
+                                        (("correction_factor", float(f"{f.factor:.6g}")),)) for f in findings]
+                   + [outside.Unexplained(e.start_s, e.end_s, e.channel, "air_event",
+                                          e.describe("", 0.0), (("size", round(e.size, 4)), ("event", 0.0)))
+                      for e in stretches.events]
+                   + _channel_scale(problem, improved)
+                   + _failed_signatures(problem, selection)
+                   + outside.report(problem, list(verdict.shapes), leftover, spindle, span, peaks))
+    chi2_dof, p_value = residual_test(problem, improved)
+    base_excess = _excess(problem, baseline)
+    share = 1.0 - _excess(problem, improved) / base_excess if base_excess > 0 else 1.0
+    bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
+    named = []
+    for m in sorted(verdict.subset):
+        mech = MECHANISMS[m]
+        delta = selection.bic[verdict.subset - {m}] - selection.bic[verdict.subset]
+        size = mech.size(problem, improved)
+        evidence = Evidence(delta, size / mech.floor, share, p_value > RESIDUAL_P, verdict.replacement_margin.get(m))
+        named.append(Named(m, confidence(evidence), mech.reading(problem, improved, {"bone_mu_w": bone_mu_w}), delta,
+                           size, selection.inclusion.get(m, 0.0), selection.checks.get(m, ()), evidence))
+    named.sort(key=lambda n: -n.confidence)
+    say(f"named {len(named)} mechanism(s), {len(unexplained)} unexplained feature(s)")
+    summary = summarise_fit(problem, baseline, improved)
     seconds = time.perf_counter() - start
     say(f"diagnosed in {seconds:.2f} s")
-    return Diagnosis(recording, problem, baseline, fits, selection, verdict, tuple(mismatch), mechanisms, unexplained,
-                     summary, noise_models, _timing(problem, baseline, cortex), label, seconds, tuple(notes))
+    return Diagnosis(recording, problem, baseline, tuple(fits.values()), selection, verdict, tuple(mismatch),
+                     tuple(named), tuple(sorted(unexplained, key=lambda u: (u.start_s, u.channel))), summary,
+                     tuple(ChannelNoise(c, m) for c, m in noise_models.items()), _timing(problem, baseline, cortex),
+                     ResidualCheck(chi2_dof, p_value), label, seconds, tuple(notes))

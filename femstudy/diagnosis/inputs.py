@@ -84,9 +84,9 @@ def trace_cortex(sim: TraceSimulation, rec: Recording, given: float | None) -> t
                    f"reaches, {depth:.2f} mm"]
 
 
-def read_simulation(path, rec: Recording) -> TraceSimulation:
-    """A simulated trace in the recording format, placed on the recording's clock, with its
-    events; its feed and speed must match the recording's."""
+def read_trace(path, rec: Recording) -> TraceSimulation:
+    """A simulated trace in the recording format, on its own clock; its feed and speed must match
+    the recording's."""
     keys = {"feed_mm_s": rec.feed_mm_s, "spindle_rpm": rec.spindle_rpm}
     sim = read_recording(path, keys, override_header=True)
     for key, value in keys.items():
@@ -94,7 +94,12 @@ def read_simulation(path, rec: Recording) -> TraceSimulation:
             if note.startswith(f"{key} = ") and "overrides" in note:
                 raise UserError(f"simulation {sim.name} was computed for {key} = {sim_header_value(note)} but the "
                                 f"recording {rec.name} has {key} = {value:g}")
-    return with_events(on_recording_clock(TraceSimulation.from_recording(sim, rec.spindle_rpm), rec), rec)
+    return TraceSimulation.from_recording(sim, rec.spindle_rpm)
+
+
+def read_simulation(path, rec: Recording) -> TraceSimulation:
+    """A simulated trace in the recording format, placed on the recording's clock, with its events."""
+    return with_events(on_recording_clock(read_trace(path, rec), rec)[0], rec)
 
 
 def with_events(sim: TraceSimulation, rec: Recording) -> TraceSimulation:
@@ -104,21 +109,22 @@ def with_events(sim: TraceSimulation, rec: Recording) -> TraceSimulation:
     return sim
 
 
-def on_recording_clock(sim: TraceSimulation, rec: Recording) -> TraceSimulation:
-    """The trace itself when its clock is the recording's, else moved onto it.
+def on_recording_clock(sim: TraceSimulation, rec: Recording) -> tuple[TraceSimulation, tuple[float, ...]]:
+    """The trace itself when its clock is the recording's, else moved onto it; and each channel's
+    rate correlation with the recording there (its sign is the channel's polarity, :mod:`.sanity`).
 
     The lag comes from the correlation of the two (:func:`.timing.clock_offset_s`), which needs
     no detection of the cut in the recording. A lag within ``CLOCK_TOLERANCE_S`` is left to the
     alignment; a larger one means the trace runs on a clock of its own (an FE history usually
     starts at contact): it is moved by the lag, and a note says so."""
     channels = [rec.thrust_N] + ([rec.torque_Nmm] if rec.torque_Nmm is not None and sim.has_torque else [])
-    lag, value = clock_offset_s(rec.time_s, channels, sim, rec.spindle_rpm)
+    lag, value, correlations = clock_offset_s(rec.time_s, channels, sim, rec.spindle_rpm)
     if abs(lag) <= CLOCK_TOLERANCE_S:
-        return sim
+        return sim, correlations
     moved = replace(sim, time_s=sim.time_s + lag)
     moved.note = (f"{sim.label} runs on another clock: moved by {lag:+.3f} s, where it correlates best with the "
-                  f"recording (r = {value:.3f})")
-    return moved
+                  f"recording (rate correlation {value:.3f})")
+    return moved, correlations
 
 
 def sim_header_value(note: str) -> str:

@@ -5,9 +5,9 @@ hundreds of milliseconds) on top of white noise. In the analysis band (below a f
 coloured part dominates, and smoothed samples a decimation step apart are correlated. So the
 noise of each channel is modelled as a stationary process, fitted on the recording itself:
 
-1. **Where**: the load-free stretches (the aligned simulation is unloaded, more than
-   ``EDGE_MARGIN_S`` from its loads), each detrended by a straight line (a drift is a
-   mechanism, not noise). With less than ``MIN_FREE_S`` of them, the raw residual of the
+1. **Where**: the stretches where the drill is surely in air (:mod:`.air`: more than half a second
+   from any load of the aligned simulation, with the events found there left out), each
+   detrended by a straight line (a drift is a mechanism, not noise). With less than ``MIN_FREE_S`` of them, the raw residual of the
    aligned simulation over the whole compared span is used instead, high-passed by a
    running median of ``FALLBACK_WINDOW_S`` (which keeps the noise and removes the slow
    mismatch), and a note says so.
@@ -20,12 +20,17 @@ noise of each channel is modelled as a stationary process, fitted on the recordi
    time 1/2πf_c) and 1/f^α above f_c otherwise — is fitted by Whittle's likelihood,
    Σ_k ln S_p(f_k) + I_k/S_p(f_k), to the Hann-tapered periodograms I_k of the stretches,
    with S_p(f) = S(f) exp(−4π²σ_p²f²) the pre-smoothed spectrum.
-   Below the lowest frequency the stretches resolve, f_r, the fitted form is extrapolated
-   (a corner f_c is allowed down to f_r/4, so flicker noise keeps rising there) and raised by
+   Below the lowest frequency the stretches resolve, f_r, the slowest noise is what decides whether
+   a slow mechanism (a drift, a softening) is significant, and the few seconds of load-free data
+   pin it poorly (a fitted corner there is as often the detrending's or the white part's as the
+   noise's): the coloured part keeps rising at least as f^(−max(α, 1)) (an amplifier's flicker)
+   from its level at f_r down to half the inverse of the compared window, flat below. Its level at
+   f_r counts only as far as it stands above one standard error of the lowest octave's periodogram,
+   (1/√m)(W + coloured): a few seconds of white noise fluctuate into a weak red part, and extrapolating
+   that over two decades would bury a real mechanism. The result is raised by
    the standard error of the level it was fitted to, a factor 1 + 1/√m with m the periodogram
-   ordinates in the lowest octave [f_r, 2f_r], reached an octave below f_r: the few seconds of
-   load-free data pin the slowest noise only to tens of percent, and underrating it would make
-   slow mechanisms look significant.
+   ordinates in the lowest octave [f_r, 2f_r], reached an octave below f_r: underrating the
+   slowest noise would make slow mechanisms look significant.
 4. **Covariance of the analysis samples**: the band smooths with σ_g, so between two instants
    Δ apart C(Δ) = 2 ∫₀^∞ S(f) exp(−4π²σ_g²f²) cos(2πfΔ) df, integrated numerically. Near the
    window's edges the kernel is truncated; each sample's standard deviation is scaled by its
@@ -39,7 +44,7 @@ squares): fit, model selection, mismatch location and the residual test all use 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg, ndimage, optimize, signal
@@ -48,8 +53,6 @@ from femstudy.diagnosis.band import gaussian_operator
 
 #: Least total load-free time [s] from which the noise is fitted.
 MIN_FREE_S = 1.0
-#: A load-free stretch starts and ends this far from any simulated load [s].
-EDGE_MARGIN_S = 0.3
 #: Shortest load-free stretch used [s].
 MIN_STRETCH_S = 0.4
 #: Running-median window that removes slow mismatch from the fallback residual [s].
@@ -58,6 +61,12 @@ FALLBACK_WINDOW_S = 0.6
 PRE_FRACTION = 1.0 / 3.0
 #: Bounds of the spectral exponent α (2: AR(1) or a random walk; 1: flicker noise).
 ALPHA_RANGE = (0.3, 2.0)
+#: Below the lowest frequency the data resolve, an unresolved corner is not assumed: the coloured
+#: part keeps rising at least as 1/f (an amplifier's flicker) down to half the window's inverse.
+FLICKER = 1.0
+#: A stretch of length L detrended by a line loses the power of its lowest periodogram bins: only
+#: frequencies from this many times 1/L are used (else a flattening that is not the noise's is fitted).
+DETRENDED_BINS = 3.0
 #: Frequencies where the pre-smoothing keeps less than this share of the power are not used.
 MIN_PRE_GAIN = 0.05
 
@@ -74,16 +83,25 @@ class NoiseSpectrum:
     seconds: float                    #: how much data [s]
     resolved_hz: float = 0.0          #: f_r, the lowest frequency the data resolved [Hz]
     low_margin: float = 1.0           #: 1 + 1/√m, the factor on the fit below f_r
+    floor_hz: float = 0.0             #: below this the spectrum is flat: half the inverse of the window [Hz]
 
     def fitted(self, f: np.ndarray) -> np.ndarray:
         """The fitted form W + A (f_c² + f²)^(−α/2) [unit²/Hz]."""
         return self.white + self.amplitude * (self.corner_hz ** 2 + f ** 2) ** (-self.exponent / 2)
 
     def spectrum(self, f: np.ndarray) -> np.ndarray:
-        """S(f) of the raw noise [unit²/Hz], raised below ``resolved_hz`` (module docstring)."""
+        """S(f) of the raw noise [unit²/Hz], extrapolated below ``resolved_hz`` (module docstring)."""
         f = np.asarray(f, dtype=float)
+        below = f < self.resolved_hz
+        out = self.fitted(f)
+        if self.amplitude > 0:
+            at = self.amplitude * (self.corner_hz ** 2 + self.resolved_hz ** 2) ** (-self.exponent / 2)
+            at = max(at - (self.low_margin - 1.0) * (self.white + at), 0.0)  # what stands one standard error
+            ratio = self.resolved_hz / np.maximum(f, max(self.floor_hz, 1e-6))
+            flicker = self.white + at * ratio ** max(self.exponent, FLICKER)
+            out = np.where(below, np.maximum(out, flicker), out)
         octaves = np.clip(np.log2(self.resolved_hz / np.maximum(f, 1e-12)), 0.0, 1.0)
-        return self.fitted(f) * (1.0 + (self.low_margin - 1.0) * octaves)
+        return out * (1.0 + (self.low_margin - 1.0) * octaves)
 
     def smoothed_autocovariance(self, lags_s: np.ndarray, sigma_g: float) -> np.ndarray:
         """C(Δ) of the noise after a Gaussian smoothing of width ``sigma_g`` [s]."""
@@ -114,14 +132,14 @@ def _periodograms(series: list[np.ndarray], step_s: float, low_hz: float) -> tup
         window = np.hanning(n)
         spectrum = np.abs(np.fft.rfft(x * window)) ** 2 * step_s / np.sum(window ** 2)
         f = np.fft.rfftfreq(n, step_s)
-        keep = (f >= max(low_hz, 1.5 / (n * step_s))) & (f < 0.5 / step_s)
+        keep = (f >= max(low_hz, DETRENDED_BINS / (n * step_s))) & (f < 0.5 / step_s)
         freqs.append(f[keep])
         values.append(spectrum[keep])
     return np.concatenate(freqs), np.concatenate(values)
 
 
 def fit_spectrum(series: list[np.ndarray], step_s: float, pre_sigma_s: float, source: str,
-                 low_hz: float = 0.0) -> NoiseSpectrum:
+                 low_hz: float = 0.0, floor_hz: float = 0.0) -> NoiseSpectrum:
     """Whittle fit of S(f) (see the module docstring) to pre-smoothed, detrended ``series``
     sampled every ``step_s``, using frequencies above ``low_hz``.
 
@@ -132,6 +150,7 @@ def fit_spectrum(series: list[np.ndarray], step_s: float, pre_sigma_s: float, so
     pre_sigma_s : the pre-smoothing width σ_p [s].
     source : where they come from (reported).
     low_hz : lowest frequency used [Hz].
+    floor_hz : below it the extrapolated spectrum is flat [Hz].
 
     Returns
     -------
@@ -150,7 +169,7 @@ def fit_spectrum(series: list[np.ndarray], step_s: float, pre_sigma_s: float, so
     f, periodogram, gain = f[keep], periodogram[keep], gain[keep]
     if not np.any(periodogram > 0):  # a noise-free recording (a simulation compared with itself)
         return NoiseSpectrum(0.0, 0.0, float(f.min()), 2.0, source + ", no noise found",
-                             sum(x.size for x in usable) * step_s, float(f.min()), 1.0)
+                             sum(x.size for x in usable) * step_s, float(f.min()), 1.0, floor_hz)
     lowest = max(float(f.min()) / 4, 1e-3)  # a corner just below the data is still seen
     highest = float(f.max())
 
@@ -178,7 +197,7 @@ def fit_spectrum(series: list[np.ndarray], step_s: float, pre_sigma_s: float, so
     resolved = float(f.min())
     octave = int(np.count_nonzero(f <= 2 * resolved))
     return NoiseSpectrum(w, a, fc, float(alpha), source, sum(x.size for x in usable) * step_s,
-                         resolved, 1.0 + 1.0 / math.sqrt(octave))
+                         resolved, 1.0 + 1.0 / math.sqrt(octave), floor_hz)
 
 
 def _presmooth(t: np.ndarray, x: np.ndarray, sigma_p: float) -> np.ndarray:
@@ -189,34 +208,25 @@ def _presmooth(t: np.ndarray, x: np.ndarray, sigma_p: float) -> np.ndarray:
     return gaussian_operator(t, centres, sigma_p) @ x
 
 
-def free_stretches(t: np.ndarray, loaded: np.ndarray) -> list[tuple[int, int]]:
-    """Index ranges [i, j) of samples farther than ``EDGE_MARGIN_S`` from any loaded sample and
-    at least ``MIN_STRETCH_S`` long."""
-    dt = float(np.median(np.diff(t)))
-    grow = max(int(round(EDGE_MARGIN_S / dt)), 1)
-    near = ndimage.binary_dilation(loaded, iterations=grow) if loaded.any() else loaded
-    free = ~near
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(int), [0]])))
-    out = []
-    for i, j in zip(edges[::2], edges[1::2]):
-        if t[j - 1] - t[i] >= MIN_STRETCH_S:
-            out.append((int(i), int(j)))
-    return out
+def runs(t: np.ndarray, mask: np.ndarray) -> list[tuple[int, int]]:
+    """Index ranges [i, j) of the runs of ``mask`` at least ``MIN_STRETCH_S`` long."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], mask.astype(int), [0]])))
+    return [(int(i), int(j)) for i, j in zip(edges[::2], edges[1::2]) if t[j - 1] - t[i] >= MIN_STRETCH_S]
 
 
-@dataclass
+@dataclass(frozen=True)
 class NoiseFit:
-    """The noise models of the channels, and a note on how they were obtained."""
+    """The noise model of each channel, and notes on how they were obtained."""
 
-    models: dict
-    notes: list = field(default_factory=list)
+    models: dict[str, NoiseSpectrum]
+    notes: tuple[str, ...] = ()
 
 
-def fit_noise(t: np.ndarray, residuals: dict, loaded: np.ndarray, sigma_g: float) -> NoiseFit:
-    """Noise spectrum per channel from the raw ``residuals`` (recording − aligned simulation)
-    on the samples ``t``; ``loaded`` marks samples where the simulation has load."""
+def fit_noise(t: np.ndarray, residuals: dict, air: np.ndarray, sigma_g: float) -> NoiseFit:
+    """Noise spectrum per channel from the raw ``residuals`` (recording − aligned simulation) on the
+    samples ``t``; ``air`` marks the samples surely in air with nothing but noise (:mod:`.air`)."""
     sigma_p = PRE_FRACTION * sigma_g
-    stretches = free_stretches(t, loaded)
+    stretches = runs(t, air)
     free_s = sum(t[j - 1] - t[i] for i, j in stretches)
     notes = []
     models = {}
@@ -231,11 +241,11 @@ def fit_noise(t: np.ndarray, residuals: dict, loaded: np.ndarray, sigma_g: float
             series = [_presmooth(t, high, sigma_p)]
             source = f"the residual of the aligned simulation, high-passed at {FALLBACK_WINDOW_S:g} s"
             low = 2.0 / FALLBACK_WINDOW_S
-        models[channel] = fit_spectrum(series, sigma_p, sigma_p, source, low)
+        models[channel] = fit_spectrum(series, sigma_p, sigma_p, source, low, 0.5 / max(float(t[-1] - t[0]), 1e-3))
     if free_s < MIN_FREE_S:
-        notes.append(f"only {free_s:.1f} s of the recording is load-free: the noise model comes from the "
+        notes.append(f"only {free_s:.1f} s of the recording is surely load-free: the noise model comes from the "
                      f"residual of the aligned simulation, high-passed, and may miss the slowest noise")
-    return NoiseFit(models, notes)
+    return NoiseFit(models, tuple(notes))
 
 
 class Whitener:

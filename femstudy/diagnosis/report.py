@@ -1,4 +1,7 @@
-"""What ``femstudy diagnose`` prints and writes: summary text, figures, markdown report."""
+"""What ``femstudy diagnose`` prints and writes: summary text, figures, markdown report.
+
+Every function takes a :class:`~femstudy.diagnosis.result.Diagnosis` ``d`` and reads it through
+``d.to_json()`` and its arrays; this module imports nothing of the diagnosis itself."""
 
 from __future__ import annotations
 
@@ -9,7 +12,6 @@ import textwrap
 import numpy as np
 
 from femstudy import atomic
-from femstudy.diagnosis.result import DiagnosisResult
 from femstudy.recordings.figures import pyplot, save
 
 UNITS = {"thrust_N": ("thrust", "N"), "torque_Nmm": ("torque", "N·mm")}
@@ -21,7 +23,7 @@ def _wrap(text: str, indent: int) -> str:
     return textwrap.fill(text, width=100, initial_indent=" " * indent, subsequent_indent=" " * indent)
 
 
-def summary_text(d: DiagnosisResult) -> str:
+def summary_text(d) -> str:
     """The printed summary: inputs, noise, alignment, mismatch, mechanisms, unexplained
     features, fit (in-sample and held out), residual check. "Compared below" is the frequency
     where the smoothing's gain is exp(−1/2)."""
@@ -57,32 +59,32 @@ def summary_text(d: DiagnosisResult) -> str:
                          f"{'high' if g < 1 else 'low'}: a calibration difference (specific cutting energy, "
                          f"drill), not missing physics")
     lines.append("")
-    if d.mismatch:
+    if js["mismatch"]:
         lines.append("mismatch (recording vs aligned simulation, beyond noise):")
-        for m in d.mismatch:
-            lines.append(f"  {m.channel:11s} {m.start_s:7.2f} - {m.end_s:7.2f} s   "
-                         f"-log10 p = {m.significance:.4g}   max |z| = {m.max_abs_z:.3g}")
+        for m in js["mismatch"]:
+            lines.append(f"  {m['channel']:11s} {m['start_s']:7.2f} - {m['end_s']:7.2f} s   "
+                         f"-log10 p = {m['significance']:.4g}   max |z| = {m['max_abs_z']:.3g}")
     else:
         lines.append("mismatch: none beyond noise")
     lines.append("")
-    if d.mechanisms:
+    if js["missing_physics"]:
         lines.append("missing physics:")
-        for m in d.mechanisms:
-            lines.append(f"  {m.mechanism} (confidence {m.confidence:.3f}, drop-one dBIC "
-                         f"{m.evidence.delta_bic:.4g})")
-            lines.append(_wrap(m.explanation, 4))
-    elif d.unexplained:
+        for m in js["missing_physics"]:
+            lines.append(f"  {m['mechanism']} (confidence {m['confidence']:.3f}, drop-one dBIC "
+                         f"{m['evidence']['delta_bic']:.4g})")
+            lines.append(_wrap(m["explanation"], 4))
+    elif js["unexplained"]:
         lines.append("missing physics: none of the catalogue's mechanisms")
     else:
         lines.append("missing physics: none - the simulation explains the recording within the noise")
-    if d.unexplained:
+    if js["unexplained"]:
         lines += ["", "unexplained (outside the catalogue):"]
-        for u in d.unexplained:
-            lines.append(f"  {u.channel:11s} {u.start_s:7.2f} - {u.end_s:7.2f} s   [{u.kind}]")
-            lines.append(_wrap(u.description, 4))
+        for u in js["unexplained"]:
+            lines.append(f"  {u['channel']:11s} {u['start_s']:7.2f} - {u['end_s']:7.2f} s   [{u['kind']}]")
+            lines.append(_wrap(u["description"], 4))
     lines.append("")
-    for c, s in d.fit_summary.items():
-        name, unit = UNITS[c]
+    for s in d.fit_summary:
+        name, unit = UNITS[s.channel]
         b, i = s.baseline, s.improved
         lines.append(f"fit, {name} over the cut {s.window_s[0]:.2f}-{s.window_s[1]:.2f} s: "
                      f"R2 {b.r2:.4f} -> {i.r2:.4f} in sample, {b.r2_heldout:.4f} -> {i.r2_heldout:.4f} "
@@ -90,7 +92,7 @@ def summary_text(d: DiagnosisResult) -> str:
     check = js["residual_check"]
     if check["consistent_with_noise"]:
         verdict = "consistent with the noise model"
-    elif d.unexplained:
+    elif js["unexplained"]:
         verdict = "NOT consistent with noise: see 'unexplained'"
     else:
         verdict = "NOT consistent with noise, though no feature stands out"
@@ -98,16 +100,17 @@ def summary_text(d: DiagnosisResult) -> str:
     return "\n".join(lines)
 
 
-def _shade(ax, d: DiagnosisResult, channel: str) -> None:
-    for m in d.mismatch:
-        if m.channel == channel:
-            ax.axvspan(m.start_s, m.end_s, color="tab:orange", alpha=0.12, lw=0)
-    for u in d.unexplained:
-        if u.channel in (channel, "both"):
-            ax.axvspan(u.start_s, u.end_s, fill=False, hatch="//", edgecolor="tab:purple", alpha=0.35, lw=0)
+def _shade(ax, d, channel: str) -> None:
+    js = d.to_json()
+    for m in js["mismatch"]:
+        if m["channel"] == channel:
+            ax.axvspan(m["start_s"], m["end_s"], color="tab:orange", alpha=0.12, lw=0)
+    for u in js["unexplained"]:
+        if u["channel"] in (channel, "both"):
+            ax.axvspan(u["start_s"], u["end_s"], fill=False, hatch="//", edgecolor="tab:purple", alpha=0.35, lw=0)
 
 
-def plot(path, d: DiagnosisResult, panels: str = "both", channels: tuple[str, ...] | None = None) -> None:
+def plot(path, d, panels: str = "both", channels: tuple[str, ...] | None = None) -> None:
     """Overlay (recording, simulation, simulation + missing physics) and/or the smoothed
     residual before and, on its own scale, after adding the missing physics, per channel
     (default all); mismatch intervals shaded."""
@@ -120,8 +123,10 @@ def plot(path, d: DiagnosisResult, panels: str = "both", channels: tuple[str, ..
     fig, axes = plt.subplots(len(rows), 1, figsize=(9, 1.9 * sum(heights) + 0.8), sharex=True,
                              constrained_layout=True, squeeze=False, gridspec_kw={"height_ratios": heights})
     t_model, t_dec = problem.band.t_model, problem.band.t_dec
-    base, improved = problem.predict(d.baseline.params), problem.predict(d.improved.params)
-    found = ", ".join(m.mechanism.replace("_", " ") for m in d.mechanisms) or "nothing missing"
+    js = d.to_json()
+    base = dict(zip(problem.channels, d.baseline.evaluation.grid))
+    improved = dict(zip(problem.channels, d.improved.evaluation.grid))
+    found = ", ".join(m["mechanism"].replace("_", " ") for m in js["missing_physics"]) or "nothing missing"
     raw = {"thrust_N": rec.thrust_N, "torque_Nmm": rec.torque_Nmm}
     for ax, (c, kind) in zip(axes[:, 0], rows):
         k = problem.channels.index(c)
@@ -145,34 +150,35 @@ def plot(path, d: DiagnosisResult, panels: str = "both", channels: tuple[str, ..
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=7, loc="best", framealpha=0.85)
     axes[-1, 0].set_xlabel("time [s]")
-    extra = f"; unexplained: {', '.join(sorted({u.kind for u in d.unexplained}))} (hatched)" if d.unexplained else ""
+    extra = (f"; unexplained: {', '.join(sorted({u['kind'] for u in js['unexplained']}))} (hatched)"
+             if js["unexplained"] else "")
     fig.suptitle(f"{rec.name}: {found}{extra} (shaded: mismatch beyond noise)", fontsize=10)
     save(fig, path)
 
 
-def write_json(path, d: DiagnosisResult) -> None:
-    """The JSON contract (:meth:`.result.DiagnosisResult.to_json`), written atomically."""
+def write_json(path, d) -> None:
+    """The JSON contract (:meth:`Diagnosis.to_json`), written atomically."""
     atomic.write_text(path, json.dumps(d.to_json(), indent=2) + "\n")
 
 
-def markdown(d: DiagnosisResult, summary: str) -> str:
+def markdown(d, summary: str) -> str:
     """report.md: the summary, both figures, each mechanism's parameters and the best subsets."""
     js = d.to_json()
     lines = [f"# Diagnosis of {d.recording.name}", "", "```", summary, "```", "",
              "![overlay](overlay.png)", "", "![residuals](residuals.png)", "",
              "## Mechanisms", ""]
-    if not d.mechanisms:
+    if not js["missing_physics"]:
         lines.append("None: the simulation explains the recording within the noise.")
-    for m in d.mechanisms:
-        lines += [f"### {m.mechanism} (confidence {m.confidence:.3f})", "", m.explanation, "",
+    for m in js["missing_physics"]:
+        lines += [f"### {m['mechanism']} (confidence {m['confidence']:.3f})", "", m["explanation"], "",
                   "| parameter | value |", "|---|---|"]
-        lines += [f"| {k} | {v} |" for k, v in m.parameters.items()]
+        lines += [f"| {k} | {v} |" for k, v in m["parameters"].items()]
         lines.append("")
-    if d.unexplained:
+    if js["unexplained"]:
         lines += ["## Unexplained (outside the catalogue)", "", "| from [s] | to [s] | channel | kind | description |",
                   "|---|---|---|---|---|"]
-        lines += [f"| {u.start_s} | {u.end_s} | {u.channel} | {u.kind} | {u.description} |"
-                  for u in d.unexplained]
+        lines += [f"| {u['start_s']} | {u['end_s']} | {u['channel']} | {u['kind']} | {u['description']} |"
+                  for u in js["unexplained"]]
         lines.append("")
     lines += ["## Candidate subsets (BIC, lowest first)", "", "| mechanisms | BIC |", "|---|---|"]
     lines += [f"| {s} | {b:.1f} |" for s, b in list(js["selection"]["bic"].items())[:8]]
@@ -183,7 +189,7 @@ def markdown(d: DiagnosisResult, summary: str) -> str:
     return "\n".join(lines)
 
 
-def write_report(folder, d: DiagnosisResult, summary: str) -> None:
+def write_report(folder, d, summary: str) -> None:
     """``folder``/report.md, overlay.png, residuals.png and diagnosis.json (written atomically)."""
     with atomic.atomic_folder(folder) as tmp:
         plot(tmp / "overlay.png", d, "overlay")

@@ -9,14 +9,17 @@ high until the drill stops, which looks like a retraction).
 Events of a trace (:func:`trace_events`), on its lightly smoothed thrust F and slope F':
 
 - contact: where the first loaded samples extrapolate to zero (the trace's own reading);
-- full engagement: where, after the steepest entry slope, F' first falls below
-  ``KNEE_FRACTION`` of it (the end of the tip cone's entry ramp); without a clear knee,
-  contact + l/f;
+- full engagement: where, between ``KNEE_WINDOW`` times l/f after contact, F' first falls below
+  ``KNEE_FRACTION`` of the ramp's median slope (the end of the tip cone's entry ramp; a chisel
+  edge's step at contact does not count); without such a knee, contact + l/f;
 - feed stop: one revolution before the loads vanish for good (or the trace's end if it ends
   loaded);
 - breakthrough: the start of the first fall between full engagement and the feed stop that
-  is steeper than ``FALL_FRACTION`` of the entry slope, lasts over two revolutions (not the
-  stop itself) and takes away more than ``MIN_FALL`` of the thrust. The cortex is then
+  is steeper than ``FALL_FRACTION`` of the slope of the cone leaving the cortex (the thrust at
+  full engagement over l/f), lasts over two revolutions and ``MIN_FALL_DURATION`` of l/f (the fall
+  after the feed stops lasts a revolution or a few; at 1 mm/s and 800 rpm the exit takes over a
+  second, some fifteen revolutions) and takes away more than ``MIN_FALL`` of the thrust. A steep
+  entry (a chisel edge's step at contact) does not set the scale. The cortex is then
   f × (breakthrough − contact). Without such a fall the trace does not break through: the
   cortex is at least the depth reached, f × (stop − contact), and clogging is never frozen.
 
@@ -25,7 +28,9 @@ recording and of the trace (both channels when both have torque), smoothed by a 
 ``CLOCK_SMOOTHING_S`` and sampled every ``CLOCK_STEP_S``, over every lag that keeps the trace's
 contact ``CONTACT_MARGIN_S`` inside the recording. The rates peak at the edges — contact,
 breakthrough, stop — so tare, scale, a drift or a clogging trend change the correlation's value,
-not where it peaks. A recording whose own clock runs a few percent fast or slow correlates
+not where it peaks. A channel written upside down is placed too: its polarity is the sign of its
+strongest level correlation over all lags (a rate alone cannot tell an inverted channel from the
+trace's entry put on the recording's exit). A recording whose own clock runs a few percent fast or slow correlates
 poorly everywhere, and its best lag can be spurious: the trace's own clock (lag 0, when it puts
 the contact inside the recording) is kept unless another lag correlates better by
 ``CLOCK_PREFERENCE``.
@@ -39,12 +44,22 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-#: Full engagement: the slope has fallen below this fraction of the steepest entry slope.
+#: The trace is smoothed over this fraction of l/f (at least 20 ms or half a revolution) for its
+#: events, and a fall may pause this long: a simulation's loads can move in steps (lip elements,
+#: a mesh) that stall a slow fall for tens of milliseconds.
+SMOOTHING_OF_ENTRY = 0.08
+#: Full engagement: the slope has fallen below this fraction of the ramp's (its median over the
+#: middle of the cone's entry time l/f), looked for between these multiples of l/f after contact.
 KNEE_FRACTION = 0.3
-#: A breakthrough fall is steeper than this fraction of the entry slope ...
+KNEE_WINDOW = (0.6, 1.5)
+#: A breakthrough fall is steeper than this fraction of the geometric exit slope F·f/l (the cone
+#: leaving the cortex takes l/f) ...
 FALL_FRACTION = 0.2
-#: ... and removes at least this fraction of the thrust where it starts.
+#: ... removes at least this fraction of the thrust where it starts ...
 MIN_FALL = 0.12
+#: ... and lasts at least two revolutions and this fraction of l/f (the fall after the feed stops
+#: lasts a revolution or a few: at slow feed, l/f is far longer).
+MIN_FALL_DURATION = 0.3
 #: Grid step of the clock correlation [s].
 CLOCK_STEP_S = 0.01
 #: Smoothing of the signals whose rates are correlated [s].
@@ -97,32 +112,38 @@ def trace_events(time_s: np.ndarray, thrust_N: np.ndarray, contact_s: float, sto
     -------
     TraceEvents
 
-    Examples
-    --------
+    Example
+    -------
     >>> t = np.linspace(0, 6, 3001)
     >>> F = np.interp(t, [1, 2, 4, 5, 5.05], [0, 20, 20, 4, 0])
-    >>> round(trace_events(t, F, 1.0, 5.0, 1.0, 1200, 1.0).cortex_mm, 2)
+    >>> round(trace_events(t, F, 1.0, 5.0, 1.0, 1200, 1.0).cortex_mm, 1)
     3.0
     """
     revolution = 60.0 / spindle_rpm
-    F = _smoothed(time_s, thrust_N, min(0.02, revolution / 2))
+    entry_s = cone_mm / feed_mm_s
+    F = _smoothed(time_s, thrust_N, max(min(0.02, revolution / 2), SMOOTHING_OF_ENTRY * entry_s))
     slope = np.gradient(F, time_s)
     end = stop_s if math.isfinite(stop_s) else float(time_s[-1])
-    entry = (time_s >= contact_s) & (time_s <= min(contact_s + 3 * cone_mm / feed_mm_s, end))
-    full = contact_s + cone_mm / feed_mm_s
-    entry_slope = float(np.max(slope[entry])) if np.any(entry) else 0.0
-    if entry_slope > 0:
-        k_max = int(np.flatnonzero(entry)[np.argmax(slope[entry])])
-        after = np.flatnonzero((slope[k_max:] < KNEE_FRACTION * entry_slope) & (time_s[k_max:] <= end))
-        if after.size:
-            full = float(time_s[k_max + after[0]])
+    full = contact_s + entry_s
+    ramp = (time_s >= contact_s + 0.2 * entry_s) & (time_s <= contact_s + 0.8 * entry_s)
+    ramp_slope = float(np.median(slope[ramp])) if np.count_nonzero(ramp) >= 3 else 0.0
+    if ramp_slope > 0:
+        later = np.flatnonzero((time_s >= contact_s + KNEE_WINDOW[0] * entry_s)
+                               & (time_s <= min(contact_s + KNEE_WINDOW[1] * entry_s, end))
+                               & (slope < KNEE_FRACTION * ramp_slope))
+        if later.size:
+            full = float(time_s[later[0]])
     breakthrough = None
-    if entry_slope > 0:
+    exit_s = cone_mm / feed_mm_s
+    engaged = float(np.interp(full, time_s, F))
+    if engaged > 0:
         window = (time_s > full) & (time_s < end - 0.5 * revolution)
-        falling = window & (slope < -FALL_FRACTION * entry_slope)
+        falling = window & (slope < -FALL_FRACTION * engaged / exit_s)
+        step = float(np.median(np.diff(time_s)))
+        falling = ndimage.binary_closing(falling, iterations=max(int(SMOOTHING_OF_ENTRY * exit_s / step), 1)) & window
         edges = np.flatnonzero(np.diff(np.concatenate([[0], falling.astype(int), [0]])))
         for i, j in zip(edges[::2], edges[1::2]):
-            lasting = time_s[j - 1] - time_s[i] >= 2 * revolution
+            lasting = time_s[j - 1] - time_s[i] >= max(2 * revolution, MIN_FALL_DURATION * exit_s)
             drop = F[i] - F[j - 1]
             if lasting and F[i] > 0 and drop >= MIN_FALL * F[i]:
                 breakthrough = float(time_s[i])
@@ -132,16 +153,26 @@ def trace_events(time_s: np.ndarray, thrust_N: np.ndarray, contact_s: float, sto
     return TraceEvents(float(contact_s), float(full), breakthrough, float(stop_s), cortex, float(depth))
 
 
-def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spindle_rpm: float) -> tuple[float, float]:
+def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spindle_rpm: float
+                   ) -> tuple[float, float, tuple[float, ...]]:
     """Lag [s] that best puts the trace ``sim`` (a :class:`~.baseline.TraceSimulation`) on the
-    recording's clock, and the correlation there (see the module docstring)."""
+    recording's clock, the mean correlation there, and each channel's rate correlation (its sign
+    says whether the channel is written with the trace's polarity; see the module docstring).
+
+    The rates place the lag precisely but cannot tell a channel written upside down from a wrong
+    lag: the entry's rise and the exit's fall are edges of similar size, so the trace's entry put
+    on the recording's exit correlates as strongly, with the opposite sign. The levels can: the
+    plateau of the cut correlates with the recording's plateau far more than with anything at a
+    mirror lag. So each channel's polarity is the sign of its level correlation of largest size
+    over all lags, and the lag maximises the mean rate correlation taken with those signs."""
     grid = np.arange(rec_t[0], rec_t[-1], CLOCK_STEP_S)
     width = CLOCK_SMOOTHING_S / CLOCK_STEP_S
 
-    def rate(y: np.ndarray) -> np.ndarray:
-        return np.gradient(ndimage.gaussian_filter1d(y, width, axis=-1, mode="nearest"), axis=-1)
+    def level(y: np.ndarray) -> np.ndarray:
+        return ndimage.gaussian_filter1d(y, width, axis=-1, mode="nearest")
 
-    recorded = [rate(np.interp(grid, rec_t, _smoothed(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
+    levels = [level(np.interp(grid, rec_t, _smoothed(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
+    recorded = [np.gradient(y) for y in levels]
     lo_span, hi_span = sim.span()
     first, last = grid[0] + CONTACT_MARGIN_S - sim.contact_s, grid[-1] - 1.0 - sim.contact_s
     lags = np.arange(first, last, CLOCK_STEP_S)
@@ -151,22 +182,29 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     # the trace covers grid[begin:end] - lag; lags covering as many instants are scored together
     begin = np.searchsorted(grid, lags + lo_span, side="left")
     end = np.searchsorted(grid, lags + hi_span, side="right")
-    value = np.full(lags.size, -np.inf)
+    n_channels = min(sum(1 for s in sim.loads(grid[:1]) if s is not None), len(recorded))
+    by_rate = np.full((n_channels, lags.size), np.nan)
+    by_level = np.zeros((n_channels, lags.size))
     for n in np.unique(end - begin):
         if n < 20:
             continue
         group = np.flatnonzero(end - begin == n)
         for chunk in np.array_split(group, max(1, group.size * n // 500_000 + 1)):
             index = begin[chunk, None] + np.arange(n)
-            scores = [_correlation(y[index], rate(s))
-                      for y, s in zip(recorded, sim.loads(grid[index] - lags[chunk, None])) if s is not None]
-            value[chunk] = np.mean(scores, axis=0)
-    if not np.isfinite(value).any():
-        return 0.0, -math.inf  # no lag leaves enough of the trace to correlate
+            loads = [s for s in sim.loads(grid[index] - lags[chunk, None]) if s is not None][:n_channels]
+            for c, s in enumerate(loads):
+                smooth = level(s)
+                by_rate[c, chunk] = _correlation(recorded[c][index], np.gradient(smooth, axis=-1))
+                by_level[c, chunk] = _correlation(levels[c][index], smooth)
+    if not np.isfinite(by_rate).any():
+        return 0.0, -math.inf, tuple(1.0 for _ in range(n_channels))  # too little overlap anywhere
+    strongest = np.argmax(np.abs(by_level), axis=1)
+    signs = np.where(by_level[np.arange(n_channels), strongest] < 0, -1.0, 1.0)
+    value = np.where(np.isfinite(by_rate).all(axis=0), np.mean(signs[:, None] * np.nan_to_num(by_rate), axis=0), -np.inf)
     k = int(np.argmax(value))
     if own and value[0] >= value[k] - CLOCK_PREFERENCE:
-        return 0.0, float(value[0])
-    return float(lags[k]), float(value[k])
+        k = 0
+    return float(lags[k]), float(value[k]), tuple(float(v) for v in by_rate[:, k])
 
 
 def _correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -1,0 +1,137 @@
+"""The registry of the catalogue: what a mechanism is (:class:`Mechanism`), the records it returns,
+and :data:`MECHANISMS`, filled by :func:`register` from each mechanism's module (see the package).
+
+The diagnosis objects a mechanism receives — the problem (:class:`~..problem.Problem`), the model's
+frame (:class:`~..model.Frame`), an evaluation (:class:`~..model.Evaluation`) and a fit
+(:class:`~..fit.Fit`) — are described, not imported, so this module depends on nothing of the
+diagnosis.
+"""
+
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+
+class Role(enum.Enum):
+    LOAD = "load"
+    FEED = "feed"
+    GAIN = "gain"
+    SENSOR = "sensor"
+
+
+@dataclass(frozen=True)
+class Layout:
+    """A mechanism's parameters for one variant: names, bounds, starting values; ``counted`` marks
+    the parameters that count towards the model's size only when they leave their lower bound
+    (the non-negative coefficients of a monotone spline); the others always count."""
+
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    start: np.ndarray
+    counted_when_active: np.ndarray
+    scanned: float = 0.0          #: extra BIC cost of the variant's scanned parameters (a searched frequency)
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+
+@dataclass(frozen=True)
+class Term:
+    """A mechanism's contribution on the model grid at given parameters, channels × instants, and
+    its derivatives (channels × instants × parameters); ``lead``/``lead_jacobian`` only for FEED."""
+
+    value: np.ndarray
+    jacobian: np.ndarray
+    lead: np.ndarray | None = None
+    lead_jacobian: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Variant:
+    """Discrete settings of a mechanism that are not fitted by least squares (a frequency found by a
+    scan, a number of harmonics, a polynomial degree), and a label for the report."""
+
+    settings: tuple = ()
+    label: str = ""
+
+    def get(self, key: str, default=None):
+        return dict(self.settings).get(key, default)
+
+
+@dataclass(frozen=True)
+class Check:
+    """One signature test of a named mechanism: passed or not, the figure it rests on and a sentence.
+    ``finding``: the ``unexplained`` kind to report when this test fails for a mechanism that is
+    otherwise significant (what the data show instead), or empty."""
+
+    name: str
+    passed: bool
+    value: float
+    text: str
+    finding: str = ""
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One reported parameter: name (with its unit in the name), value."""
+
+    name: str
+    value: float | str
+
+
+@dataclass(frozen=True)
+class Reading:
+    """A named mechanism's physical reading: parameters and a paragraph."""
+
+    parameters: tuple[Parameter, ...]
+    text: str
+
+
+class Mechanism(Protocol):
+    """What the diagnosis needs from a catalogue mechanism (see the package docstring)."""
+
+    name: str
+    role: Role
+    #: least size that counts as missing physics, in the units of :meth:`size`
+    floor: float
+    #: whether :meth:`variants` scans the residual (else they are fixed alternatives)
+    scans: bool
+
+    def available(self, problem: object) -> bool: ...
+
+    def variants(self, problem: object, residual: np.ndarray | None, base: object) -> list[Variant]: ...
+
+    def layout(self, problem: object, variant: Variant) -> Layout: ...
+
+    def term(self, problem: object, frame: object, variant: Variant, theta: np.ndarray) -> Term: ...
+
+    def size(self, problem: object, fit: object) -> float: ...
+
+    def checks(self, problem: object, fit: object, refit) -> list[Check]: ...
+
+    def reading(self, problem: object, fit: object, context: dict) -> Reading: ...
+
+
+#: The registered mechanisms, in registration order (module name order).
+MECHANISMS: dict[str, Mechanism] = {}
+
+
+def register(mechanism: Mechanism) -> Mechanism:
+    """Add ``mechanism`` to the catalogue (called by its module)."""
+    if mechanism.name in MECHANISMS:
+        raise ValueError(f"mechanism {mechanism.name} registered twice")
+    MECHANISMS[mechanism.name] = mechanism
+    return mechanism
+
+
+def names() -> tuple[str, ...]:
+    return tuple(MECHANISMS)
+
+

@@ -1,0 +1,129 @@
+"""Sensor drift: the zero of a channel moves smoothly over the whole record, in air as in contact.
+
+Signature (any law: linear, an amplifier's warm-up, a creep, a slow sigmoid): drift is the
+instrument's, not the cut's, so it
+
+- **adds** to a channel (it does not scale with the load) and each channel drifts on its own;
+- is **present in air as well as in contact**: the load-free stretches before contact and after
+  retraction show it. A trend that only the cut shows is not a drift.
+
+Fit: on each channel a Legendre series P₁ … P_d over the compared window (d = 1, 2 or 3,
+variants), free signs. Size: the largest change of a channel's zero over the window as a
+fraction of that channel's simulated peak.
+
+Tests (:meth:`SensorDrift.checks`): ``seen_in_air`` — refitted without drift, the model is worse
+on the load-free instants by at least :data:`AIR_GAIN` (χ² beyond the drift's parameters);
+``explains_air`` — the drift removes at least :data:`AIR_SHARE` of what the load-free instants
+show beyond the noise model. A zero that wanders (a random walk of the amplifier) is also seen in
+air, but a smooth trend leaves most of its wander there: that is noise the noise model could not
+resolve from a few seconds of air, not a drift.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from femstudy.diagnosis.catalogue.registry import Check, Layout, Parameter, Reading, Role, Term, Variant, register
+from femstudy.diagnosis.flexible import legendre_basis
+
+NAME = "sensor_drift"
+DEGREES = (1, 2, 3)
+FLOOR = 0.01
+#: Least χ² gain on the load-free instants (beyond the drift's parameters) that shows the drift in air.
+AIR_GAIN = 10.0
+#: Least share of the load-free instants' excess over the noise model that a drift removes.
+AIR_SHARE = 0.9
+#: Least load-free time [s] on which a drift can be seen.
+MIN_AIR_S = 0.8
+
+
+def window(problem) -> tuple[float, float]:
+    t = problem.band.t_dec
+    return float(t[0]), float(t[-1])
+
+
+class SensorDrift:
+    name = NAME
+    role = Role.SENSOR
+    floor = FLOOR
+    scans = False
+
+    def available(self, problem) -> bool:
+        return True
+
+    def variants(self, problem, residual, base) -> list[Variant]:
+        return [Variant((("degree", d),), f"degree {d}") for d in DEGREES]
+
+    def layout(self, problem, variant: Variant) -> Layout:
+        d = variant.get("degree", 1)
+        names = [f"{c}_P{k}" for c in problem.channels for k in range(1, d + 1)]
+        n = len(names)
+        return Layout(tuple(names), np.full(n, -np.inf), np.full(n, np.inf), np.zeros(n), np.zeros(n, bool))
+
+    def term(self, problem, frame, variant, theta) -> Term:
+        d = variant.get("degree", 1)
+        lo, hi = window(problem)
+        X = legendre_basis(frame.t, lo, hi, d)
+        n_ch = len(problem.channels)
+        value = np.zeros((n_ch, frame.t.size))
+        jac = np.zeros((n_ch, frame.t.size, theta.size))
+        for c in range(n_ch):
+            block = slice(c * d, (c + 1) * d)
+            value[c] = X @ theta[block]
+            jac[c, :, block] = X
+        return Term(value, jac)
+
+    def curves(self, problem, fit, t: np.ndarray) -> np.ndarray:
+        d = fit.spec.variant(NAME).get("degree", 1)
+        lo, hi = window(problem)
+        X = legendre_basis(t, lo, hi, d)
+        theta = fit.block(NAME)
+        return np.vstack([X @ theta[c * d:(c + 1) * d] for c in range(len(problem.channels))])
+
+    def size(self, problem, fit) -> float:
+        curves = self.curves(problem, fit, problem.band.t_dec)
+        return max(float(np.ptp(curves[c])) / problem.peak(c) for c in range(len(problem.channels)))
+
+    def checks(self, problem, fit, refit) -> list[Check]:
+        air_s = float(np.count_nonzero(problem.air & problem.usable)) * float(np.median(np.diff(problem.band.t_dec)))
+        if air_s < MIN_AIR_S:
+            return [Check("seen_in_air", False, air_s, f"only {air_s:.1f} s of the record is surely load-free: "
+                                                       f"a drift cannot be told from the cut's own trends")]
+        gain = refit("without_in_air", fit)
+        share = refit("air_explained", fit)
+        return [Check("seen_in_air", gain >= AIR_GAIN, gain,
+                      f"without the drift the load-free instants are worse by {gain:.1f} (χ² beyond the drift's "
+                      f"parameters; at least {AIR_GAIN:g})"),
+                Check("explains_air", share >= AIR_SHARE, share,
+                      f"a smooth drift removes {100 * share:.0f} % of what the load-free instants show beyond the noise "
+                      f"model (at least {100 * AIR_SHARE:g} %: the rest is a zero that wanders, not a drift)",
+                      "wandering_zero")]
+
+    def reading(self, problem, fit, context) -> Reading:
+        lo, hi = window(problem)
+        span = hi - lo
+        t = np.linspace(lo, hi, 201)
+        curves = self.curves(problem, fit, t)
+        units = {"thrust_N": ("thrust", "N"), "torque_Nmm": ("torque", "N·mm")}
+        params, parts = [], []
+        for c, name in enumerate(problem.channels):
+            word, unit = units[name]
+            change = float(curves[c, -1] - curves[c, 0])
+            rate = change / span
+            curvature = float(np.max(np.abs(curves[c] - (curves[c, 0] + (t - lo) / span * change))))
+            key = "thrust_N" if name == "thrust_N" else "torque_Nmm"
+            params += [Parameter(f"{key}_per_s", round(rate, 5)), Parameter(f"{word}_change_{unit.replace('·', '')}",
+                                                                                  round(change, 4)),
+                       Parameter(f"{word}_departure_from_straight_{unit.replace('·', '')}", round(curvature, 4))]
+            parts.append(f"the {word} reading by {change:+.3g} {unit} over {span:.1f} s ({rate:+.3g} {unit}/s"
+                         + (f", bending up to {curvature:.3g} {unit} off a straight line" if curvature > 0.1 * abs(change)
+                            else "") + ")")
+        params.append(Parameter("duration_s", round(span, 3)))
+        text = (f"The sensor zero moves smoothly, in contact and out of it: {' and '.join(parts)}. The load-free "
+                f"stretches before contact and after retraction show it, which separates it from softening or "
+                f"clogging. It is an instrument drift, not a cutting load; correct the recording for it before "
+                f"calibrating.")
+        return Reading(tuple(params), text)
+
+
+register(SensorDrift())

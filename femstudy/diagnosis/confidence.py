@@ -1,0 +1,39 @@
+"""How sure a named mechanism is: evidence figures mapped to the chance it is right.
+
+The figures (:func:`evidence`) are the mechanism's own: its drop-one ΔBIC, how many times its
+floor its size is, the share of the baseline's excess χ² the final model removes, whether the
+final residual is consistent with noise, and how far the best shape that could replace it fell
+short. :func:`confidence` maps them to a probability by a logistic model whose coefficients
+(:data:`COEFFICIENTS`) were fitted on the tuning cases of the form-randomised benchmark
+(``bench/formbench``, tuning forms and seed only); docs/diagnosis.md gives the reliability table
+measured on the held-out forms.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Evidence:
+    delta_bic: float
+    size_over_floor: float
+    explained_share: float
+    consistent: bool
+    replacement_margin: float | None
+
+    def features(self) -> tuple[float, ...]:
+        margin = self.replacement_margin if self.replacement_margin is not None else 100.0
+        return (1.0, math.log10(max(self.delta_bic, 1.0)), math.log(max(self.size_over_floor, 1e-3)),
+                min(max(self.explained_share, 0.0), 1.0), 1.0 if self.consistent else 0.0,
+                math.log10(max(margin, 1.0)))
+
+
+#: Logistic coefficients on :meth:`Evidence.features` (intercept first).
+COEFFICIENTS = (-2.0, 0.8, 0.6, 1.5, 1.0, 0.5)
+
+
+def confidence(e: Evidence) -> float:
+    z = sum(c * x for c, x in zip(COEFFICIENTS, e.features()))
+    return 1.0 / (1.0 + math.exp(-z))

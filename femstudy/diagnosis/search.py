@@ -1,0 +1,101 @@
+"""Every subset of the catalogue fitted, each mechanism in its best variant.
+
+1. The mechanisms whose variants are fixed alternatives (a drift's polynomial degree, a monotone
+   spline's number of intervals; listed simplest first) are fitted together, each in its richest
+   variant; then each mechanism's other variants in turn, the rest left richest. Per mechanism the
+   variant of the lowest BIC and its simplest variant stay candidates.
+2. A mechanism whose variants come from a scan (a feed pulsation's frequency) scans the residual
+   of that fit and of the simulation alone; the distinct frequencies found, at most
+   :data:`MAX_SCANNED` of them, are its candidates.
+3. Every subset (2⁴ = 16 with the four mechanisms) is fitted in every combination of its members'
+   candidates, each started from the best fit of the subsets one mechanism smaller; the
+   combination with the lowest BIC (on the data's own noise level) is the subset's fit.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+from femstudy.diagnosis.catalogue import MECHANISMS, Variant
+from femstudy.diagnosis.fit import Fit, fit
+from femstudy.diagnosis.model import Spec
+from femstudy.diagnosis.problem import Problem
+
+#: Most scanned variants (frequencies) tried per mechanism.
+MAX_SCANNED = 4
+#: Two scanned frequencies closer than this (relative) are one.
+SAME_FREQUENCY = 0.03
+
+
+def bic(problem: Problem, f: Fit) -> float:
+    """χ² + k ln n on the data's own noise level."""
+    return f.chi2_total * problem.n_eff_factor + f.n_params * math.log(max(problem.n * problem.n_eff_factor, 3))
+
+
+def _start(fits: dict, subset: frozenset) -> dict:
+    smaller = [fits[subset - {m}] for m in subset if subset - {m} in fits]
+    return min(smaller, key=lambda f: f.chi2_total).params() if smaller else {}
+
+
+def _distinct(variants: list[Variant]) -> list[Variant]:
+    out: list[Variant] = []
+    for v in variants:
+        f = v.get("frequency_hz")
+        if f is None or all(abs(f / o.get("frequency_hz") - 1) > SAME_FREQUENCY or v.get("harmonics") != o.get("harmonics")
+                            for o in out):
+            out.append(v)
+    return out[:MAX_SCANNED]
+
+
+def candidates(problem: Problem, baseline: Fit) -> dict[str, list[Variant]]:
+    """Each available mechanism's candidate variants (items 1 and 2 of the module docstring)."""
+    available = [m for m in MECHANISMS.values() if m.available(problem)]
+    fixed = [m for m in available if not m.scans]
+    options = {m.name: m.variants(problem, None, None) for m in fixed}
+    richest = {m.name: options[m.name][-1] for m in fixed}
+
+    def together(choice: dict) -> Fit:
+        return fit(problem, Spec(tuple((m.name, choice[m.name]) for m in fixed)))
+
+    full = best = together(richest) if fixed else None
+    out = {}
+    for m in fixed:
+        chosen, chosen_bic = richest[m.name], bic(problem, full)
+        for variant in options[m.name][:-1]:
+            f = together({**richest, m.name: variant})
+            if bic(problem, f) < chosen_bic:
+                chosen, chosen_bic = variant, bic(problem, f)
+            if bic(problem, f) < bic(problem, best):
+                best = f
+        out[m.name] = [chosen] + ([options[m.name][0]] if options[m.name][0] != chosen else [])
+    for m in available:
+        if m.scans:
+            found = []
+            for base in ([best] if best is not None else []) + [baseline]:
+                found += m.variants(problem, problem.y - base.model, base.evaluation)
+            out[m.name] = _distinct(found)
+    return {name: variants for name, variants in out.items() if variants}
+
+
+def fit_all(problem: Problem, baseline: Fit) -> dict[frozenset, Fit]:
+    """The best fit of every subset (item 3 of the module docstring), by frozenset of names."""
+    options = candidates(problem, baseline)
+    names = list(options)
+    fits: dict[frozenset, Fit] = {frozenset(): baseline_fit(problem)}
+    for size in range(1, len(names) + 1):
+        for subset in itertools.combinations(names, size):
+            key = frozenset(subset)
+            start = _start(fits, key)
+            best = None
+            for combo in itertools.product(*(options[n] for n in subset)):
+                f = fit(problem, Spec(tuple(zip(subset, combo))), start)
+                if best is None or bic(problem, f) < bic(problem, best):
+                    best = f
+            fits[key] = best
+    return fits
+
+
+def baseline_fit(problem: Problem) -> Fit:
+    """The empty model fitted: the simulation with the alignment refined and the tares."""
+    return fit(problem, Spec())
