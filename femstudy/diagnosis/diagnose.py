@@ -212,8 +212,8 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None, bone: s
     -------
     Diagnosis
 
-    Example
-    -------
+    Examples
+    --------
     >>> d = diagnose("rec.csv", "sim.csv")                           # doctest: +SKIP
     >>> d.to_json()["missing_physics"], d.to_json()["unexplained"]   # doctest: +SKIP
     """

@@ -27,8 +27,8 @@ def monotone_basis(x: np.ndarray, lower: float, upper: float, intervals: int) ->
     """I-splines on [lower, upper] at ``x`` (clipped to the interval): ``x.size`` × (intervals + 2)
     columns, each 0 at ``lower``, 1 at ``upper`` and non-decreasing.
 
-    Example
-    -------
+    Examples
+    --------
     >>> B = monotone_basis(np.linspace(0, 1, 5), 0.0, 1.0, 3)
     >>> B.shape, bool(np.all(np.diff(B, axis=0) >= 0)), B[0].max(), B[-1].min()
     ((5, 5), True, 0.0, 1.0)

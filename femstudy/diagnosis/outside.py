@@ -247,8 +247,8 @@ def spindle_line(time_s: np.ndarray, thrust_N: np.ndarray, model_thrust: np.ndar
     N/60; None otherwise, when no line stands out, or when the same line stands out in air
     (samples ``air``; mains interference is there too, a load's ripple is not).
 
-    Example
-    -------
+    Examples
+    --------
     >>> t = np.arange(0, 6, 1e-3)
     >>> F = 20 * (1 + 0.05 * np.sin(2 * np.pi * 15 * t))
     >>> round(spindle_line(t, F, np.full_like(t, 20.0), 1000, (1, 5))["speed_drop"], 2)

@@ -190,8 +190,8 @@ class Diagnosis:
         """Write the JSON contract, the overlay/residual figure and the report folder (report.md,
         overlay.png, residuals.png, diagnosis.json), each atomically; returns what was written.
 
-        Example
-        -------
+        Examples
+        --------
         >>> d.write(json_path="d.json", report_dir="report")  # doctest: +SKIP
         [PosixPath('d.json'), PosixPath('report/report.md')]
         """

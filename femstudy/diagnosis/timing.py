@@ -112,8 +112,8 @@ def trace_events(time_s: np.ndarray, thrust_N: np.ndarray, contact_s: float, sto
     -------
     TraceEvents
 
-    Example
-    -------
+    Examples
+    --------
     >>> t = np.linspace(0, 6, 3001)
     >>> F = np.interp(t, [1, 2, 4, 5, 5.05], [0, 20, 20, 4, 0])
     >>> round(trace_events(t, F, 1.0, 5.0, 1.0, 1200, 1.0).cortex_mm, 1)
