@@ -97,6 +97,9 @@ def diagnosis(path, out):
     # the information criterion of every candidate subset, losing ones included: a losing
     # candidate's non-convex fit may settle elsewhere on a 1e-6 change of the data
     found.get("selection", {}).pop("bic", None)
+    # the reader's notes (a unit converted, stamps merged) describe each file's own layout
+    reading = set(read_recording(path).notes)
+    found["notes"] = [n for n in found.get("notes", []) if n not in reading]
     return found
 
 
