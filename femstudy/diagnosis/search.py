@@ -17,7 +17,7 @@ from __future__ import annotations
 import itertools
 import math
 
-from femstudy.diagnosis.catalogue import MECHANISMS, Variant
+from femstudy.diagnosis.catalogue import MECHANISMS, Variant, in_order
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.model import Spec
 from femstudy.diagnosis.problem import Problem
@@ -34,7 +34,7 @@ def bic(problem: Problem, f: Fit) -> float:
 
 
 def _start(fits: dict, subset: frozenset) -> dict:
-    smaller = [fits[subset - {m}] for m in subset if subset - {m} in fits]
+    smaller = [fits[subset - {m}] for m in in_order(subset) if subset - {m} in fits]
     return min(smaller, key=lambda f: f.chi2_total).params() if smaller else {}
 
 

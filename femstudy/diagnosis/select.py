@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from femstudy.diagnosis.catalogue import MECHANISMS, Check
+from femstudy.diagnosis.catalogue import MECHANISMS, Check, in_order
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.signatures import refitter
@@ -115,14 +115,14 @@ def select(problem: Problem, fits: dict) -> Selection:
     best = min(bic, key=bic.get)
     weights = {s: math.exp(-(b - bic[best]) / 2) for s, b in bic.items()}
     total = sum(weights.values())
-    mechanisms = {m for s in fits for m in s}
+    mechanisms = in_order({m for s in fits for m in s})
     inclusion = {m: sum(w for s, w in weights.items() if m in s) / total for m in mechanisms}
     dropped: list[Dropped] = []
     held: dict[frozenset, float] = {}
     checks: dict[str, tuple[Check, ...]] = {}
     subset = best
     while subset:
-        for m in subset:   # each smaller fit also from the larger optimum
+        for m in in_order(subset):   # each smaller fit also from the larger optimum
             smaller = subset - {m}
             polished = fit(problem, fits[subset].spec.without(m), fits[subset].params())
             if polished.chi2_total < fits[smaller].chi2_total:
@@ -131,7 +131,7 @@ def select(problem: Problem, fits: dict) -> Selection:
         current = fits[subset]
         reasons: dict[str, tuple[float, str]] = {}
         failures: dict[str, tuple[Check, ...]] = {}
-        for m in subset:
+        for m in in_order(subset):
             mech = MECHANISMS[m]
             delta = bic[subset - {m}] - bic[subset]
             size = mech.size(problem, current)
@@ -152,5 +152,5 @@ def select(problem: Problem, fits: dict) -> Selection:
         dropped.append(Dropped(worst, reasons[worst][1], failures.get(worst, ())))
         subset = subset - {worst}
     chi2_dof, p_value = residual_test(problem, fits[subset])
-    return Selection(subset, bic, inclusion, tuple(dropped), {m: checks.get(m, ()) for m in subset}, held,
+    return Selection(subset, bic, inclusion, tuple(dropped), {m: checks.get(m, ()) for m in in_order(subset)}, held,
                      chi2_dof, p_value, inflation)

@@ -21,7 +21,7 @@ import math
 from dataclasses import dataclass
 
 from femstudy.diagnosis import outside
-from femstudy.diagnosis.catalogue import MECHANISMS
+from femstudy.diagnosis.catalogue import MECHANISMS, in_order
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.select import MIN_DELTA_BIC, Dropped, information, n_eff
@@ -66,7 +66,7 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
                     tried.append((kept, shape))
         scored = sorted(((bic(_with_shape(problem, fits[kept], shape), shape), kept, shape) for kept, shape in tried),
                         key=lambda b: b[0])
-        for m in subset:
+        for m in in_order(subset):
             alternatives = [b for b, kept, _ in scored if m not in kept]
             if alternatives:
                 margins[m] = min(alternatives) - full
@@ -78,14 +78,14 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
         reference = bic(beside, shape)
         standing = set(kept)
         needed = max(MIN_DELTA_BIC, BESIDE_SHARE * (full - replaced_bic))
-        for m in subset - kept:   # still needed beside the shape, and of a size that counts?
+        for m in in_order(subset - kept):   # still needed beside the shape, and of a size that counts?
             without = _with_shape(problem, fits[subset - {m}], shape)
             if bic(without, shape) - reference >= needed and MECHANISMS[m].size(problem, beside) >= MECHANISMS[m].floor:
                 standing.add(m)
         if standing == set(subset):
             break   # the shape is needed beside every mechanism: they stand, it is reported
         kind, channel, _ = outside.describe(problem, shape)
-        for m in subset - standing:
+        for m in in_order(subset - standing):
             replaced.append(Dropped(m, f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its place "
                                        f"(BIC lower by {full - replaced_bic:.1f})"))
         subset = frozenset(standing)

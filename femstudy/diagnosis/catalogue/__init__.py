@@ -22,10 +22,10 @@ import importlib
 import pkgutil
 
 from femstudy.diagnosis.catalogue.registry import (MECHANISMS, Check, Layout, Mechanism, Parameter, Reading, Role,
-                                                   Term, Variant, names, register)
+                                                   Term, Variant, in_order, names, register)
 
-__all__ = ["MECHANISMS", "Check", "Layout", "Mechanism", "Parameter", "Reading", "Role", "Term", "Variant", "names",
-           "register"]
+__all__ = ["MECHANISMS", "Check", "Layout", "Mechanism", "Parameter", "Reading", "Role", "Term", "Variant", "in_order",
+           "names", "register"]
 
 for _module in sorted(m.name for m in pkgutil.iter_modules(__path__)):
     if _module != "registry":

@@ -135,3 +135,10 @@ def names() -> tuple[str, ...]:
     return tuple(MECHANISMS)
 
 
+def in_order(subset) -> tuple[str, ...]:
+    """The names of ``subset`` (any collection of mechanism names) in the catalogue's order: a
+    set's own order changes from one process to the next (string hashing), so every loop whose
+    order reaches a result or a file goes through this."""
+    return tuple(n for n in MECHANISMS if n in subset)
+
+
