@@ -16,7 +16,7 @@ import femstudy
 def main(recording: Path, simulation: Path, json_path: Path | None = None):
     d = femstudy.diagnose(recording, simulation)  # a femstudy.Diagnosis
     for m in d.mechanisms:
-        print(f"missing: {m.mechanism} (confidence {m.confidence:.2f}) {m.parameters}")
+        print(f"missing: {m.mechanism} (confidence {m.confidence:.2f}) {m.reading.parameters}")
     for u in d.unexplained:
         print(f"unexplained, {u.channel} {u.start_s:.2f}-{u.end_s:.2f} s: {u.description}")
     fit = d.to_json()["fit"]

@@ -30,7 +30,7 @@ def monotone_basis(x: np.ndarray, lower: float, upper: float, intervals: int) ->
     Examples
     --------
     >>> B = monotone_basis(np.linspace(0, 1, 5), 0.0, 1.0, 3)
-    >>> B.shape, bool(np.all(np.diff(B, axis=0) >= 0)), B[0].max(), B[-1].min()
+    >>> B.shape, bool(np.all(np.diff(B, axis=0) >= 0)), float(B[0].max()), float(B[-1].min())
     ((5, 5), True, 0.0, 1.0)
     """
     span = max(upper - lower, 1e-12)
