@@ -3,6 +3,7 @@
     PYTHONPATH=. nice python -m bench.formbench.run --split tuning --seed 1 --save results/fb-tuning-1.json
     PYTHONPATH=. nice python -m bench.formbench.run --split held_out --seed 2 --save results/fb-held-2.json
     PYTHONPATH=. python -m bench.formbench.run --table results/fb-held-1.json results/fb-held-2.json
+    PYTHONPATH=. python -m bench.formbench.run --table results/fb-held-2.json --recompute-confidence
 
 The first form writes each case (:mod:`bench.formbench.cases`) into ``--out`` (default a
 temporary folder), diagnoses it through the command line (:mod:`bench.formbench.score`), prints
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 from bench.formbench.cases import case_seeds, make_case
@@ -42,6 +44,19 @@ def run(split: str, seed: int, out: Path, only: list[str] | None, first: int | N
     return outcomes
 
 
+def recomputed(outcome: Outcome) -> dict:
+    """The outcome's named mechanisms with their confidence recomputed from the saved evidence
+    (the figures are saved rounded to 4 digits: the confidence moves by less than 1e-3)."""
+    from femstudy.diagnosis.confidence import Evidence, confidence
+
+    out = {}
+    for name, kept in outcome.named.items():
+        e = (outcome.evidence or {}).get(name)
+        out[name] = kept if not e else confidence(Evidence(e["delta_bic"], e["size_over_floor"], e["explained_share"],
+                                                           e["residual_consistent"], e["replacement_margin"]))
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("tuning", "held_out"), default="tuning")
@@ -51,11 +66,16 @@ def main() -> int:
     parser.add_argument("--out", type=Path, help="keep the cases and their diagnoses in this folder")
     parser.add_argument("--save", type=Path, help="write the outcomes as JSON")
     parser.add_argument("--table", nargs="+", type=Path, help="tabulate saved outcomes instead of running")
+    parser.add_argument("--recompute-confidence", action="store_true",
+                        help="with --table: each named mechanism's confidence recomputed from its saved evidence "
+                             "under the current confidence model (for runs saved before its coefficients changed)")
     args = parser.parse_args()
     if args.table:
         outcomes = [Outcome(o["case"], o["refused"], o["named"], o["unexplained"], None, o["seconds"],
                             o.get("cpu_seconds", float("nan")), o.get("evidence"))
                     for path in args.table for o in json.loads(path.read_text())]
+        if args.recompute_confidence:
+            outcomes = [replace(o, named=recomputed(o)) for o in outcomes]
         print(summary(outcomes))
         print()
         print(reliability_table(outcomes))
