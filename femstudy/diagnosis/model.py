@@ -107,7 +107,7 @@ class ParameterLayout:
     upper: np.ndarray
     start: np.ndarray
     counted_when_active: np.ndarray
-    blocks: dict = field(default_factory=dict)      # mechanism -> slice
+    blocks: dict[str, slice] = field(default_factory=dict)      # mechanism -> slice
     scanned: float = 0.0
 
     def index(self, name: str) -> int:

@@ -49,7 +49,7 @@ class Shape:
     columns (instants × k), amplitudes and Δχ²; the gain and the interval it covers."""
 
     kind: str
-    parameters: dict
+    parameters: dict[str, float]
     used: tuple
     columns: tuple
     coefficients: tuple

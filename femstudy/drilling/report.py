@@ -109,7 +109,7 @@ class LoadStudy:
     histories (:class:`~femstudy.drilling.history.LoadHistory`, one per model)."""
 
     conditions: DrillingConditions
-    histories: list
+    histories: list[LoadHistory]
     text: str
 
     def rows(self) -> list[dict]:

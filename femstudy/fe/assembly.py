@@ -95,7 +95,7 @@ class FESystem:
     K: sp.csr_matrix
     point_index: np.ndarray
     M_nodes: sp.csr_matrix
-    timings: dict = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
 
     @cached_property
     def M(self) -> sp.csr_matrix:

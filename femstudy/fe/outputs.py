@@ -38,7 +38,7 @@ class Channel:
     name: str
     project: Callable[[np.ndarray], np.ndarray]
     points: np.ndarray
-    masks: dict = field(default_factory=dict)
+    masks: dict[str, np.ndarray] = field(default_factory=dict)
 
     def all_masks(self) -> dict:
         return {"all": np.ones(len(self.points), bool), **self.masks}
@@ -66,9 +66,9 @@ class Measure:
 class History:
     """Measures of one loading, keyed "<channel>" (all points) or "<channel>/<mask>"."""
 
-    measures: dict
+    measures: dict[str, Measure]
     recorded_steps: np.ndarray
-    refined_steps: dict = field(default_factory=dict)
+    refined_steps: dict[str, int] = field(default_factory=dict)
 
     def __getitem__(self, name: str) -> Measure:
         return self.measures[name]

@@ -122,8 +122,8 @@ class TransientResult:
     final_state: tuple
     free: np.ndarray = field(repr=False)
     n_dofs: int = 0
-    energies: dict = field(default_factory=dict)
-    timings: dict = field(default_factory=dict)
+    energies: dict[str, np.ndarray] = field(default_factory=dict)
+    timings: dict[str, float | list[float]] = field(default_factory=dict)
 
     @property
     def dt_s(self) -> float:
@@ -230,7 +230,7 @@ class _ReducedMarch:
     Mr: np.ndarray
     residual: float            # max ‖M a + C v + K u − f‖ / max ‖f‖
     indicator: float           # max ‖K⁻¹(M a + C v + K u − f)‖ / max ‖u‖
-    timings: dict
+    timings: dict[str, float | list[float]]
 
     def final_state(self, bc):
         return tuple(bc.expand(self.basis @ x[:, -1]) for x in (self.y, self.vy, self.ay))

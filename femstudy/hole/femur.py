@@ -28,6 +28,7 @@ follow, and decides the regions near it by the smoothed surface. Units: mm.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -36,6 +37,11 @@ from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
 from femstudy.hole.frame import HoleFrame
 from femstudy.meshing.landmarks import boundary_faces, region_interface
 from femstudy.meshing.site_surface import ray_hits
+
+if TYPE_CHECKING:
+    from scipy.interpolate import RectBivariateSpline
+
+    from femstudy.meshing.site_surface import SiteSurface
 
 #: Rays per batch in the ray casts (bounds the (rays × triangles) temporaries).
 RAY_BATCH = 64
@@ -186,11 +192,11 @@ class SurfaceColumns(_OuterColumns):
     docstring); the global mesh (``mesh_columns``) decides only between canal and cancellous
     bone below the cortex and gives the bottoms in cancellous bone."""
 
-    surface: object
+    surface: SiteSurface
     mesh_columns: FemurColumns
     frame: HoleFrame
     depth_cap_mm: float
-    inner_spline: object
+    inner_spline: RectBivariateSpline
     cancellous_code: int
 
     @property
@@ -288,9 +294,9 @@ class SmoothColumns:
     """
 
     raw: FemurColumns
-    top_spline: object
-    exit_spline: object
-    inner_spline: object = None
+    top_spline: RectBivariateSpline
+    exit_spline: RectBivariateSpline
+    inner_spline: RectBivariateSpline | None = None
     inner_code: int = 0
 
     @property

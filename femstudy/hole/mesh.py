@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -137,7 +138,7 @@ class HoleStation:
     tip_depth_mm: float
     corner_depth_mm: float
     mesh: TetMesh
-    faces: dict
+    faces: dict[str, np.ndarray]
     kept: np.ndarray
     hole: "HoleMesh" = field(repr=False)
 
@@ -170,13 +171,13 @@ class HoleMesh:
     mesh: TetMesh
     station: np.ndarray
     tip_depths_mm: np.ndarray
-    faces: dict
+    faces: dict[str, np.ndarray]
     in_hole: np.ndarray
     point_column: np.ndarray
     column_top_mm: np.ndarray
     layer_offsets_mm: np.ndarray
     disk: Disk = field(repr=False)
-    quality: dict = field(default_factory=dict)
+    quality: dict[str, Any] = field(default_factory=dict)
 
     @property
     def cone_length_mm(self) -> float:

@@ -21,10 +21,14 @@ reports them. Units: mm.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from femstudy.errors import require
+
+if TYPE_CHECKING:
+    from femstudy.hole.frame import HoleFrame
 
 PARTS = ("wall", "corner", "cone", "tip")
 
@@ -93,7 +97,7 @@ class OffsetSamples:
     t: np.ndarray
     theta: np.ndarray
     curve: OffsetCurve
-    frame: object
+    frame: HoleFrame
 
     def of(self, name: str) -> np.ndarray:
         """Mask of the points on one part of the curve."""

@@ -24,7 +24,7 @@ import logging
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -39,6 +39,9 @@ from femstudy.hole.loads import hole_loads
 from femstudy.hole.measures import HoleMeasure, distance_measures, distance_samples, exclusion_measures
 from femstudy.hole.mesh import Resolution, hole_mesh
 from femstudy.hole.probe import MeshLocator
+
+if TYPE_CHECKING:
+    from femstudy.hole.femur import FemurColumns, SmoothColumns, SurfaceColumns
 
 log = logging.getLogger(__name__)
 
@@ -300,13 +303,13 @@ class HoleSite:
     """
 
     frame: HoleFrame
-    columns: object
+    columns: FemurColumns | SurfaceColumns | SmoothColumns | TurnedColumns
     options: HoleOptions
     tips: np.ndarray
     axis_bottom_mm: float
     seconds: float
     bone_axis: np.ndarray
-    bone_axis_evidence: dict
+    bone_axis_evidence: dict[str, Any]
 
     def with_ligament(self, ligament_mm: float, drilled_depth_mm: float) -> "HoleSite":
         """The same geometry with the stations of another ligament rule (:func:`station_tips`)."""
@@ -328,7 +331,7 @@ class TurnedColumns:
     """Columns seen in a frame turned about the drill axis: local (x, y) in the turned frame are
     (c x − s y, s x + c y) in the original one."""
 
-    columns: object
+    columns: FemurColumns | SurfaceColumns | SmoothColumns | TurnedColumns
     frame: HoleFrame
     c: float
     s: float

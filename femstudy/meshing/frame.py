@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -58,7 +59,7 @@ class Frame:
     top_mm: float
     length_mm: float
     overridden: list[str] = field(default_factory=list)
-    evidence: dict = field(default_factory=dict)
+    evidence: dict[str, Any] = field(default_factory=dict)
 
     def fraction(self, x: np.ndarray) -> np.ndarray:
         """Fraction of the length from the proximal end (0 = top of head, 1 = bottom of condyles)."""

@@ -7,6 +7,7 @@ import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,8 +54,8 @@ class FemurModel:
     clamps: Clamps
     site: DrillSite
     frame: Frame
-    quality: dict
-    stats: dict
+    quality: dict[str, Any]
+    stats: dict[str, Any]
     canal_axis: np.ndarray = field(repr=False, default=None)
     surface: SiteSurface | None = field(repr=False, default=None)
 

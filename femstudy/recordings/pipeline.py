@@ -21,6 +21,7 @@ from __future__ import annotations
 import logging
 from collections import defaultdict
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -108,7 +109,7 @@ class CalibrationResult:
     normality: dict[str, NormalityResult] = field(default_factory=dict)
     ann: ann_module.NeuronStudy | None = None
     notes: list[str] = field(default_factory=list)
-    files: dict = field(default_factory=dict)
+    files: dict[str, Path | str] = field(default_factory=dict)
 
     def by_role(self, *roles: str) -> list[RunResult]:
         return [r for r in self.runs if r.role in roles]

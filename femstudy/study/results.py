@@ -55,9 +55,9 @@ class LoadingResult:
     time_s: np.ndarray
     thrust_N: np.ndarray
     torque_Nmm: np.ndarray
-    series: dict
-    peaks: dict
-    region_peaks: dict = field(default_factory=dict)
+    series: dict[str, np.ndarray]
+    peaks: dict[str, Peak]
+    region_peaks: dict[str, float] = field(default_factory=dict)
 
     @classmethod
     def from_history(cls, name: str, all_times, thrust, torque, history) -> "LoadingResult":

@@ -217,7 +217,7 @@ class ThesisStep:
     static: LoadingResult
     basis: np.ndarray
     von_mises_rows: np.ndarray
-    fields: dict
+    fields: dict[int, np.ndarray]
     static_u: np.ndarray
 
 

@@ -54,8 +54,8 @@ class Choice:
     name: str
     setting: str
     baseline: str
-    overrides: dict
-    hole: dict
+    overrides: dict[str, float | str]
+    hole: dict[str, float | str]
     source: str
 
     @property
@@ -93,7 +93,7 @@ def choices(case) -> tuple[Choice, ...]:
 class Answers:
     """The answers the table compares (NaN where not computed)."""
 
-    values: dict
+    values: dict[str, float]
 
     def change(self, baseline: "Answers") -> dict:
         """Relative change of each answer against ``baseline`` [%]."""
@@ -111,7 +111,7 @@ class Row:
     be computed)."""
 
     choice: Choice
-    changes: dict
+    changes: dict[str, float]
     seconds: float
     failed: str = ""
 
@@ -128,7 +128,7 @@ class Sensitivity:
 
     baseline: Answers
     rows: tuple
-    uncertainty_percent: dict
+    uncertainty_percent: dict[str, float | None]
     station: int
     seconds: float
 
@@ -202,7 +202,7 @@ class Variants:
     one :class:`Variant` per choice, and the wall time of the hole model the baseline and the
     alternatives that keep its meshes share [s]."""
 
-    baseline_hole: dict
+    baseline_hole: dict[str, float]
     variants: tuple
     shared_seconds: float
 

@@ -105,7 +105,7 @@ class SolverRecord:
     linear_solver: str
     factorisations: int
     solves_from_kept_solutions: int
-    assembly: dict
+    assembly: dict[str, float]
     hole_factorisations: int | None = None
 
     def as_dict(self) -> dict:
@@ -202,7 +202,7 @@ class StudyResult:
     out_of_range: tuple = ()
     sensitivity: Sensitivity | None = None
     mesh_convergence: dict | None = None
-    package_versions: dict = field(default_factory=versions)
+    package_versions: dict[str, str | None] = field(default_factory=versions)
 
     def peak(self, quantity: str, loading: str = "dynamic"):
         """The :class:`~femstudy.study.results.Peak` of a quantity (e.g. "max_deflection_mm")."""

@@ -24,11 +24,15 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from femstudy.convergence import Assessment, assess
 from femstudy.hole.mesh import Resolution
+
+if TYPE_CHECKING:
+    from femstudy.hole.study import HoleResult
 
 #: Ratio of the finer level's refinement, and of the quoted one's, to the next coarser one.
 LADDER_RATIO = 1.25
@@ -227,7 +231,7 @@ def verify_hole(quoted, run_level, options, site) -> Verification:
 class HoleAnalysis:
     """The hole models at the case's refinement and their verification (None when not asked)."""
 
-    result: object
+    result: HoleResult
     verification: Verification | None
     factorisations: int = 0
 

@@ -17,7 +17,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from femstudy import atomic
 from femstudy.errors import UserError
@@ -30,7 +30,7 @@ class Point:
     """One independent computation: a kind ("mesh" or "study") and case-file overrides."""
 
     kind: str
-    overrides: dict = field(hash=False)
+    overrides: dict[str, Any] = field(hash=False)
     label: str = ""
 
     @property

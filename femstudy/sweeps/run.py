@@ -15,6 +15,7 @@ import re
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from femstudy import atomic
 from femstudy.errors import UserError, require
@@ -45,9 +46,9 @@ class SweepResult:
     """
 
     kind: str
-    rows: list
-    columns: list
-    convergence: dict
+    rows: list[dict[str, Any]]
+    columns: list[str]
+    convergence: dict[str, dict[str, Any]]
     folder: Path
     text: str
 

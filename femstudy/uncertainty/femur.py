@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,11 @@ from femstudy.uncertainty.inputs import distributions, nominal_values
 from femstudy.uncertainty.loads import amplitudes, sample_conditions, sample_loading
 from femstudy.uncertainty.reduced import RTOL, ReducedBases, StiffnessFamily, StiffnessPoint, train
 from femstudy.uncertainty.response import Envelope, UnitResponses
+
+if TYPE_CHECKING:
+    from femstudy.casefile import Case
+    from femstudy.study.global_model import GlobalModel
+    from femstudy.study.loading import CaseLoading
 
 log = logging.getLogger(__name__)
 
@@ -46,11 +52,11 @@ class FemurBase:
     basis : the reduced bases (None when no stiffness input varies)
     """
 
-    case: object
-    model: object
-    loading: object
+    case: Case
+    model: GlobalModel
+    loading: CaseLoading
     units: UnitResponses
-    distributions: dict
+    distributions: dict[str, Distribution]
     basis: ReducedBases | None
     solver: str
     keep: Path | None

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -31,6 +32,9 @@ import scipy.sparse as sp
 from femstudy import fe
 from femstudy.materials import BoneMaterials
 from femstudy.meshing.landmarks import clamps as clamp_masks, outer_faces
+
+if TYPE_CHECKING:
+    from femstudy.meshing.model import FemurModel
 
 log = logging.getLogger(__name__)
 
@@ -59,14 +63,14 @@ class StiffnessFamily:
     """K(θ) = θ_c K_c + θ_s K_s and the clamped sets of a femur's model (full DOFs)."""
 
     system: fe.FESystem
-    femur: object
+    femur: FemurModel
     patterns: np.ndarray
     drill_point: sp.csr_matrix
     K_c: sp.csr_matrix
     K_s: sp.csr_matrix
     _outer: np.ndarray = field(repr=False)
-    _sets: dict = field(default_factory=dict, repr=False)
-    _lengths: dict = field(default_factory=dict, repr=False)
+    _sets: dict[tuple[int, int], fe.Constraints] = field(default_factory=dict, repr=False)
+    _lengths: dict[float, tuple[tuple[int, int], fe.Constraints]] = field(default_factory=dict, repr=False)
 
     @classmethod
     def of(cls, model) -> "StiffnessFamily":
@@ -231,7 +235,7 @@ class ReducedBases:
     """The bases of every clamped set a design visits, keyed by the set."""
 
     family: StiffnessFamily
-    bases: dict
+    bases: dict[tuple[int, int], ClampBasis]
     factorisations: int
 
     def evaluate(self, p: StiffnessPoint) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

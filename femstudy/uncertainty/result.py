@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -56,14 +57,14 @@ class FemurUncertainty:
 
     name: str
     surface: str
-    inputs: dict
+    inputs: dict[str, dict[str, Any]]
     unit: np.ndarray
-    samples: dict
-    nominal: dict
-    sensitivity: dict
+    samples: dict[str, np.ndarray]
+    nominal: dict[str, Any]
+    sensitivity: dict[str, dict[str, Any]]
     reduced: dict | None
     margin_basis: str | None
-    seconds: dict
+    seconds: dict[str, float]
 
     def summary(self) -> dict:
         out = {o: statistics(self.samples[o]) for o in OUTPUTS if o in self.samples}
@@ -83,7 +84,7 @@ class UncertaintyResult:
     method: str
     samples: int
     femurs: tuple
-    execution: dict
+    execution: dict[str, Any]
     out_dir: Path | None = None
     files: tuple = field(default_factory=tuple)
 

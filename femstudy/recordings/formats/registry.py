@@ -35,7 +35,7 @@ class Reader:
     read: Callable[[Path, str], Table]
     recognises: Callable[[bytes], bool] | None
     suffixes: tuple[str, ...] = ()
-    by_name: dict = field(default_factory=dict)
+    by_name: dict[str, str | None] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
