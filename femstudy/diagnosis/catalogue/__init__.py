@@ -18,15 +18,11 @@ Adding a mechanism is one new module in this package that calls :func:`register`
 imported when the package is.
 """
 
-import importlib
-import pkgutil
-
 from femstudy.diagnosis.catalogue.registry import (MECHANISMS, Check, Layout, Mechanism, Parameter, Reading, Role,
                                                    Term, Variant, in_order, names, register)
+from femstudy.plugins import import_modules
 
 __all__ = ["MECHANISMS", "Check", "Layout", "Mechanism", "Parameter", "Reading", "Role", "Term", "Variant", "in_order",
            "names", "register"]
 
-for _module in sorted(m.name for m in pkgutil.iter_modules(__path__)):
-    if _module != "registry":
-        importlib.import_module(f"{__name__}.{_module}")
+import_modules(__name__, __path__, skip=("registry",))

@@ -8,13 +8,9 @@ delay) and fitted by GLS to a residual (:mod:`..outside`). Each module defines o
 adding a shape is one new module.
 """
 
-import importlib
-import pkgutil
-
 from femstudy.diagnosis.shapes.registry import SHAPES, WORD, Context, ShapeKind, amounts, register
+from femstudy.plugins import import_modules
 
 __all__ = ["SHAPES", "WORD", "Context", "ShapeKind", "amounts", "register"]
 
-for _module in sorted(m.name for m in pkgutil.iter_modules(__path__)):
-    if _module != "registry":
-        importlib.import_module(f"{__name__}.{_module}")
+import_modules(__name__, __path__, skip=("registry",))

@@ -1,8 +1,6 @@
 """The drilling load models, one module each; importing this package registers them all
 (:mod:`femstudy.drilling.registry`). A new model is a new module here."""
 
-import importlib
-import pkgutil
+from femstudy.plugins import import_modules
 
-for _module in pkgutil.iter_modules(__path__):
-    importlib.import_module(f"{__name__}.{_module.name}")
+import_modules(__name__, __path__)

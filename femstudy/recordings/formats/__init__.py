@@ -5,9 +5,6 @@ Each reader returns a :class:`~femstudy.recordings.formats.table.Table`; each wr
 path, the columns as (quantity, unit, values) and the metadata.
 """
 
-import importlib
-import pkgutil
+from femstudy.plugins import import_modules
 
-for _module in pkgutil.iter_modules(__path__):
-    if _module.name not in ("registry", "table"):
-        importlib.import_module(f"{__name__}.{_module.name}")
+import_modules(__name__, __path__, skip=("registry", "table"))
