@@ -25,6 +25,7 @@ Stresses are the elements' own P2 fields at the points (Ïƒ = D B u_e), strains Î
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -216,20 +217,24 @@ def _placed(system, station, found: DistanceSamples) -> bool:
     return bool(at_distance.all() and inside.all())
 
 
+@functools.cache
+def _locating_code() -> bytes:
+    """The source of the code that places and locates the sample points (read once a process)."""
+    import inspect
+
+    from femstudy.hole import probe, samples
+
+    return "".join(inspect.getsource(x) for x in (samples, probe, distance_samples)).encode()
+
+
 def samples_fingerprint(system, station, distances_mm) -> str:
     """SHA-256 (32 hex digits) of what :func:`distance_samples` reads: the mesh's points,
     tetrahedra and regions, the station's hole (radius, point angle, top, corner and tip depths)
     and frame, the distances, and the source of the modules that place and locate the points."""
     import hashlib
-    import inspect
-
-    from femstudy.hole import probe, samples
 
     hole = station.hole
-    digest = hashlib.sha256()
-    for module in (samples, probe):
-        digest.update(inspect.getsource(module).encode())
-    digest.update(inspect.getsource(distance_samples).encode())
+    digest = hashlib.sha256(_locating_code())
     scalars = [hole.radius_mm, hole.point_angle_deg, hole.hole_top_mm, station.corner_depth_mm, station.tip_depth_mm]
     for array in (system.mesh.p, system.mesh.t, system.region, np.array(scalars, float), hole.frame.origin,
                   hole.frame.axis, hole.frame.e1, hole.frame.e2, np.asarray(distances_mm, float)):
