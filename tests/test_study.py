@@ -182,10 +182,13 @@ def test_a_repeated_study_factorises_nothing_and_gives_the_same_maxima(tmp_path,
     from femstudy.lanes import can_fork
 
     shutil.rmtree(mesh_cache / "solutions", ignore_errors=True)
+    shutil.rmtree(mesh_cache / "answers", ignore_errors=True)
     common = dict(order=2, step=0.5, screenshot="false", fields="false", resolved="true", application="hole")
     plain, _ = run(tmp_path, mesh_cache, scale=1.0, name="plain", keep_solutions=False, parallel=False, **common)
     first, _ = run(tmp_path, mesh_cache, scale=1.0, name="first", **common)
     again, _ = run(tmp_path, mesh_cache, scale=2.0, name="again", **common)
+    # other loads: the kept answers (femstudy.kept_answers) miss, the kept solutions serve
+    assert not again["hole"]["verification"]["kept_from_earlier_run"] and not again["dynamics"]["resolved_kept"]
     assert (plain["solver"]["factorisations"], first["solver"]["factorisations"]) == (1, 1)
     assert again["solver"]["factorisations"] == 0 and again["solver"]["solves_from_kept_solutions"] > 0
     # the quoted level, the coarser and finer levels and two more placements of the coarser: one station each
@@ -202,6 +205,25 @@ def test_a_repeated_study_factorises_nothing_and_gives_the_same_maxima(tmp_path,
             assert again["results"][quantity][loading]["value"] == pytest.approx(2 * reference, rel=1e-9)
     assert again["dynamics"]["frequencies_Hz"] == pytest.approx(plain["dynamics"]["frequencies_Hz"], rel=1e-9)
     assert again["dynamics"]["resolved_peak_mm"] == pytest.approx(2 * plain["dynamics"]["resolved_peak_mm"], rel=1e-9)
+
+
+def test_a_study_repeated_with_the_same_inputs_reads_its_answers_back(tmp_path, mesh_cache):
+    """femstudy.kept_answers: the hole models with their verification and the resolved run of a
+    study repeated unchanged are read, not computed, and say so, with every number the first
+    run's; a changed load (here its scale) changes their key and they are computed again."""
+    common = dict(order=2, step=0.5, screenshot="false", fields="false", resolved="true", application="hole")
+    first, _ = run(tmp_path, mesh_cache, scale=3.0, name="first", **common)
+    same, out = run(tmp_path, mesh_cache, scale=3.0, name="same", **common)
+    other, _ = run(tmp_path, mesh_cache, scale=3.5, name="other", **common)
+    assert (same["hole"]["verification"]["kept_from_earlier_run"], same["dynamics"]["resolved_kept"]) == (True, True)
+    assert not other["hole"]["verification"]["kept_from_earlier_run"] and not other["dynamics"]["resolved_kept"]
+    assert same["solver"]["factorisations"] == 0 and same["timings"]["hole_s"] < first["timings"]["hole_s"]
+    assert same["hole"] == {**first["hole"], "verification": {**first["hole"]["verification"],
+                                                             "kept_from_earlier_run": True}}
+    assert same["margins"] == first["margins"]
+    for name in ("resolved_peak_mm", "quasi_static_peak_mm", "resolved_drill_point_mm", "resolved_indicator"):
+        assert same["dynamics"][name] == first["dynamics"][name]
+    assert "this run read it, kept from an earlier run" in (out / "report.md").read_text()
 
 
 def test_view_writes_a_screenshot(p2_run, tmp_path):

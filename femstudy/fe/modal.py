@@ -18,6 +18,7 @@ computes and stores them.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -137,10 +138,14 @@ def _residuals(stiffness: np.ndarray, mass: np.ndarray, omega2: np.ndarray) -> n
 
 
 def _kept_path(fs: FactorizedSystem, k: int) -> Path | None:
-    """Where the k modes of fs's K_ff and M_ff are kept: beside its kept solutions, if any."""
+    """Where the k modes of fs's K_ff and M_ff are kept: beside its kept solutions, if any.
+    M_ff is named by what it is made of, the nodal mass and the free DOFs (M = M_nodes ⊗ I₃
+    restricted to them), so that finding the modes does not form it (1 s at 8 mm)."""
     if not isinstance(fs.factor, KeptSolutions):
         return None
-    return fs.factor.path.with_name(f"{fs.factor.path.stem}-modes{k}-{fingerprint(fs.M)[:16]}.npz")
+    mass = hashlib.sha256(fingerprint(fs.system.M_nodes).encode())
+    mass.update(np.ascontiguousarray(fs.bc.free, dtype=np.int64).data)
+    return fs.factor.path.with_name(f"{fs.factor.path.stem}-modes{k}-{mass.hexdigest()[:16]}.npz")
 
 
 def _read_kept(fs: FactorizedSystem, path: Path, k: int, rtol: float) -> tuple[np.ndarray, np.ndarray] | None:

@@ -121,7 +121,16 @@ def verification_lines(hole: dict) -> list[str]:
             f"where the measures peak) and by {len(v['replicates_deg'])} placements of the coarser "
             f"refinement (the mesh turned by " + ", ".join(f"{a:.3g}" for a in v["replicates_deg"])
             + " degrees) for the discretisation noise; verdicts of the convergence assessment with formal order "
-            f"{v['formal_order']:g} (docs/convergence.md). Verification cost {v['seconds']:.1f} s.", ""]
+            f"{v['formal_order']:g} (docs/convergence.md). {cost_sentence(v, 'Verification cost')}", ""]
+
+
+def cost_sentence(part: dict, what: str) -> str:
+    """What a part of the study cost [s], or that this run read it from an earlier one
+    (femstudy.kept_answers)."""
+    if part.get("kept_from_earlier_run"):
+        return (f"{what} {part['seconds']:.1f} s when computed; this run read it, kept from an earlier run of the "
+                "same inputs and code.")
+    return f"{what} {part['seconds']:.1f} s."
 
 
 def hole_section(hole: dict) -> list[str]:

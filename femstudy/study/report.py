@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from femstudy.study.hole_report import hole_headline_cell, hole_section, hole_table_rows
+from femstudy.study.hole_report import cost_sentence, hole_headline_cell, hole_section, hole_table_rows
 from femstudy.thesis import MAX_DEFLECTION_MM, MAX_VON_MISES_MPA
 
 #: Site names that correspond to the thesis's three rows (§3.3.3: mid-diaphysis, proximal end, distal end).
@@ -156,8 +156,8 @@ def sensitivity_section(sens: dict) -> list[str]:
     lines = ["**Sensitivity to modelling choices** (docs/study.md): each choice changed alone; the change of "
              "every answer in per cent of the baseline (near-hole answers at the deepest station, "
              f"{sens['station']}; deflections quasi-static; \"=\": the choice cannot change that answer). The last "
-             f"row is this run's own discretisation uncertainty of the same answers (its verification). Cost "
-             f"{sens['seconds']:.1f} s.", "",
+             f"row is this run's own discretisation uncertainty of the same answers (its verification). "
+             f"{cost_sentence(sens, 'Cost')}", "",
              "| choice | setting (baseline) | " + " | ".join(_answer(k) for k in keys) + " |",
              "|---|---|" + "---|" * len(keys)]
     lines.append("| baseline | | " + " | ".join(_fmt(sens["baseline"][k], 4) for k in keys) + " |")

@@ -38,6 +38,7 @@ from femstudy import atomic, fe
 from femstudy.casefile import Case, with_overrides
 from femstudy.execution import Executor, InProcess
 from femstudy.fe.linsolve import available_memory_bytes
+from femstudy.kept_answers import kept_answer
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.meshing.model import surface_file
 from femstudy.study import feasibility, mesh_convergence, output, plausibility, sensitivity
@@ -46,7 +47,7 @@ from femstudy.study.global_model import GlobalModel, prepare
 from femstudy.study.loading import CaseLoading, case_loading, resolved_loading
 from femstudy.study.results import LoadingResult
 from femstudy.study.study_result import Dynamics, SolverRecord, StudyResult, Timings
-from femstudy.study.verification import analyse_hole
+from femstudy.study.verification import HoleAnalysis, analyse_hole
 
 log = logging.getLogger(__name__)
 
@@ -132,16 +133,24 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         folder = None if out_dir is None else stack.enter_context(atomic.atomic_folder(Path(out_dir)))
         stack.enter_context(executor)  # left first: no part outlives the folder it writes to
         hole_part = None
+        unit_fields = fs.bc.expand(shapes)
+        # what the hole models and the sensitivity's alternatives are computed from (femstudy.kept_answers):
+        # the unit fields follow from the case and the femur (keyed by them: their round-off depends on
+        # whether kept solutions served them)
+        answers = cache_dir / "answers" if keep_solutions else None
+        key = (case, loading, _femur_key(model.femur), solver)
         if case.loads.application == "hole":  # the global field per unit patch load drives the hole models
             inputs = loading.hole_inputs(case.materials.to_fe(), case.mesh.order, case.clamps.length_mm)
             hole_part = executor.start("hole models", partial(
-                analyse_hole, inputs, model.femur, model.system, fs.bc.expand(shapes), case.loads.hole_options(),
-                solver, solutions, case.loads.verify))
+                kept_answer, answers, "hole models", (*key, case.loads.verify), partial(
+                    analyse_hole, inputs, model.femur, model.system, unit_fields, case.loads.hole_options(),
+                    solver, solutions, case.loads.verify), HoleAnalysis.read_back))
         sensitivity_part = None
         if case.analysis.sensitivity:
             sensitivity_part = executor.start("sensitivity", partial(
-                sensitivity.run_variants, case, model, loading, fs.bc.expand(shapes), solver, solutions, cache_dir,
-                case.loads.application == "hole", bool(case.analysis.modes)))
+                kept_answer, answers, "sensitivity", key, partial(
+                    sensitivity.run_variants, case, model, loading, unit_fields, solver, solutions, cache_dir,
+                    case.loads.application == "hole", bool(case.analysis.modes)), sensitivity.Variants.read_back))
         step = _thesis_step(case, fs, model, loading, shapes)
         marched = time.perf_counter()
         files_part = None
@@ -149,7 +158,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
             log.info("writing results to %s", out_dir)
             files_part = executor.start("figures and fields", partial(output.write_files, folder, model, step,
                                                                       loading.times_s))
-        dynamics, modal_done = _modes_and_resolved(case, loading, fs, model, shapes, step)
+        dynamics, modal_done = _modes_and_resolved(case, loading, fs, model, shapes, step, answers, key)
         baseline = sensitivity.baseline_answers(fs, model, loading, dynamics.frequencies_Hz[0]
                                                 if dynamics.frequencies_Hz else None) if sensitivity_part else None
         fs.factor.close()  # the global solves are done (parts forked with it hold its pages until they end)
@@ -161,7 +170,8 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
             runs = sensitivity_part.result()
             table = sensitivity.sensitivity_table(runs.variants, sensitivity.with_hole(baseline, runs.baseline_hole),
                                                   sensitivity.uncertainties(analysis),
-                                                  -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds)
+                                                  -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds,
+                                                  runs.kept)
         figures = None if files_part is None else files_part.result()
         waited = time.perf_counter()
         solver_record = SolverRecord(model.system.order, model.system.n_dofs, fs.method,
@@ -186,6 +196,13 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         if folder is not None:
             output.write_summary(folder, result)
     return result
+
+
+def _femur_key(femur) -> tuple:
+    """What of the femur its near-hole answers depend on: its mesh, clamps, site, frame, canal
+    axis, surfaces and surface file's content (not its statistics' timings or file path)."""
+    return (femur.mesh, femur.clamps, femur.site, femur.frame, femur.canal_axis, femur.surface,
+            femur.stats.get("surface_sha256"))
 
 
 def _mesh_convergence(case: Case, model: GlobalModel, cache_dir: Path) -> dict:
@@ -286,9 +303,10 @@ def _kept_steps(case: Case, n_steps: int, peak_step: int) -> set:
 
 
 def _modes_and_resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel, shapes: np.ndarray,
-                        step: ThesisStep) -> tuple[Dynamics, float | None]:
+                        step: ThesisStep, answers: Path | None, key: tuple) -> tuple[Dynamics, float | None]:
     """The modal analysis and the resolved transient the case asks for, and the time the modal
-    analysis ended (None without one)."""
+    analysis ended (None without one). The resolved run, a function of what ``key`` holds, is
+    read from ``answers`` when an earlier run kept it (femstudy.kept_answers)."""
     dynamics = Dynamics(step.scheme, step.vectors, step.indicator)
     if not case.analysis.modes:
         return dynamics, None
@@ -299,14 +317,18 @@ def _modes_and_resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel
                         check, modes_kept=modes.kept)
     modal_done = time.perf_counter()
     if case.analysis.resolved:
-        dynamics = _resolved(case, loading, fs, model, shapes, dynamics)
+        found = kept_answer(answers, "resolved transient", key, partial(_resolved, case, loading, fs, model, shapes,
+                                                                        dynamics),
+                            lambda kept: {**kept, "resolved_kept": True})
+        dynamics = replace(dynamics, **found)
     return dynamics, modal_done
 
 
 def _resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel, shapes: np.ndarray,
-              dynamics: Dynamics) -> Dynamics:
+              dynamics: Dynamics) -> dict:
     """A transient whose step resolves the lowest mode, through breakthrough, with the loads'
-    per-flute oscillation and release; its peak deflection against the quasi-static one.
+    per-flute oscillation and release; its peak deflection against the quasi-static one (the
+    fields of :class:`Dynamics` it sets).
 
     It starts at the window's first time from the quasi-static state, u0 = K⁻¹f(t0) and
     v0 = K⁻¹ḟ(t0): up to there the loads change over seconds, so the response is that state
@@ -333,11 +355,11 @@ def _resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel, shapes: 
         resolved = recorder.history()
     Q, R = np.linalg.qr(march.static_shapes)  # the quasi-static response K⁻¹P a(t) = Q (R a(t))
     quasi = fe.reduced_history(cheap, fs.bc.expand(Q), R @ A.T, metric=Q.T @ (fs.K @ Q))
-    return Dynamics(**{**dynamics.__dict__, "resolved_step_s": dt, "resolved_steps": len(A) - 1,
-                       "resolved_window_s": (float(history.time_s[0]), float(history.time_s[-1])),
-                       "resolved_vectors": march.n_vectors, "resolved_indicator": march.indicator,
-                       "resolved_peak_mm": resolved["deflection"].peak,
-                       "quasi_static_peak_mm": quasi["deflection"].peak,
-                       "resolved_drill_point_mm": resolved["drill_point"].peak,
-                       "quasi_static_drill_point_mm": quasi["drill_point"].peak,
-                       "flute_passing_Hz": loading.conditions.drill.flute_passing_hz(case.drilling.spindle_rpm)})
+    return {"resolved_step_s": dt, "resolved_steps": len(A) - 1,
+            "resolved_window_s": (float(history.time_s[0]), float(history.time_s[-1])),
+            "resolved_vectors": march.n_vectors, "resolved_indicator": march.indicator,
+            "resolved_peak_mm": resolved["deflection"].peak,
+            "quasi_static_peak_mm": quasi["deflection"].peak,
+            "resolved_drill_point_mm": resolved["drill_point"].peak,
+            "quasi_static_drill_point_mm": quasi["drill_point"].peak,
+            "flute_passing_Hz": loading.conditions.drill.flute_passing_hz(case.drilling.spindle_rpm)}

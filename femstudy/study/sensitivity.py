@@ -131,9 +131,11 @@ class Sensitivity:
     uncertainty_percent: dict[str, float | None]
     station: int
     seconds: float
+    kept: bool = False
 
     def to_json(self) -> dict:
         return {"baseline": self.baseline.values, "station": self.station, "seconds": self.seconds,
+                "kept_from_earlier_run": self.kept,
                 "mesh_uncertainty_percent": self.uncertainty_percent, "rows": [r.as_dict() for r in self.rows]}
 
 
@@ -205,6 +207,11 @@ class Variants:
     baseline_hole: dict[str, float]
     variants: tuple
     shared_seconds: float
+    kept: bool = False
+
+    def read_back(self) -> Variants:
+        """These alternatives as read from an earlier run of the same inputs (femstudy.kept_answers)."""
+        return replace(self, kept=True)
 
 
 def _global_alternative(choice, case, model, amplitudes, solver, keep, cache_dir, modes: bool):
@@ -318,10 +325,11 @@ def uncertainties(analysis) -> dict:
 
 
 def sensitivity_table(variants: tuple, baseline: Answers, uncertainty_percent: dict, station: int,
-                      shared_seconds: float = 0.0) -> Sensitivity:
+                      shared_seconds: float = 0.0, kept: bool = False) -> Sensitivity:
     """The table of ``variants`` (:func:`run_variants`) against the ``baseline``; an answer a
     variant did not compute (the deflections of a hole-model choice) did not change. Its cost is
-    the variants' own and the ``shared_seconds`` of the hole model they share."""
+    the variants' own and the ``shared_seconds`` of the hole model they share (what computing
+    them took, when they were ``kept`` from an earlier run)."""
     rows = []
     for v in variants:
         if v.failed:
@@ -332,4 +340,4 @@ def sensitivity_table(variants: tuple, baseline: Answers, uncertainty_percent: d
         rows.append(Row(v.choice, {k: (x if k in v.answers.values else None) for k, x in changes.items()},
                         v.seconds))
     return Sensitivity(baseline, tuple(rows), uncertainty_percent, station,
-                       shared_seconds + sum(v.seconds for v in variants))
+                       shared_seconds + sum(v.seconds for v in variants), kept)

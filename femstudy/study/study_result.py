@@ -47,7 +47,8 @@ class Dynamics:
     lowest_period_s, step_check : from the modal analysis; modes_kept: its modes were read back
                  from an earlier analysis of the same model (femstudy.fe.modal)
     resolved_* : the resolved run (step, steps, vectors, indicator, peak deflection and its
-                 quasi-static counterpart [mm]); amplification = resolved / quasi-static peak
+                 quasi-static counterpart [mm]); amplification = resolved / quasi-static peak;
+                 resolved_kept: read from an earlier run of the same inputs (femstudy.kept_answers)
     """
 
     scheme: str
@@ -66,6 +67,7 @@ class Dynamics:
     quasi_static_drill_point_mm: float | None = None
     flute_passing_Hz: float | None = None
     modes_kept: bool = False
+    resolved_kept: bool = False
 
     @property
     def amplification(self) -> float | None:

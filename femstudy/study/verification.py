@@ -144,6 +144,8 @@ class Verification:
     seconds : wall time of the coarse and fine levels and the replicates [s]
     stations : the governing stations the coarse and fine levels ran at
     failed : why the verification could not be made (its verdicts are then empty)
+    kept : read from an earlier run of the same inputs and code (femstudy.kept_answers); ``seconds``
+        is then what computing it took
     """
 
     levels: tuple
@@ -153,6 +155,7 @@ class Verification:
     seconds: float
     stations: tuple = ()
     failed: str = ""
+    kept: bool = False
 
     def of(self, kind: str, radius_mm: float, quantity: str = "von_mises_MPa", loading: str = "dynamic"
            ) -> Verdict | None:
@@ -165,6 +168,7 @@ class Verification:
         return {"levels": list(self.levels), "ladder_ratio": LADDER_RATIO, "replicates_deg": list(self.replicates_deg),
                 "stations": list(self.stations), "not_made": self.failed or None,
                 "formal_order": FORMAL_ORDER, "dofs": list(self.dofs), "seconds": self.seconds,
+                "kept_from_earlier_run": self.kept,
                 "measures": [v.as_dict() for v in self.verdicts]}
 
 
@@ -234,6 +238,11 @@ class HoleAnalysis:
     result: HoleResult
     verification: Verification | None
     factorisations: int = 0
+
+    def read_back(self) -> HoleAnalysis:
+        """This analysis as read from an earlier run (femstudy.kept_answers): its verification says so."""
+        return replace(self, verification=None if self.verification is None else replace(self.verification,
+                                                                                          kept=True))
 
 
 def analyse_hole(inputs, femur, system, unit_fields, options, solver: str = "auto", keep=None,
