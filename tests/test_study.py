@@ -223,7 +223,9 @@ def test_a_study_repeated_with_the_same_inputs_reads_its_answers_back(tmp_path, 
     assert same["margins"] == first["margins"]
     for name in ("resolved_peak_mm", "quasi_static_peak_mm", "resolved_drill_point_mm", "resolved_indicator"):
         assert same["dynamics"][name] == first["dynamics"][name]
-    assert "this run read it, kept from an earlier run" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "this run read it, kept from an earlier run" in report and "Verification in this run" not in report
+    assert "Verification, made by an earlier run of the same inputs and code" in report
 
 
 def test_view_writes_a_screenshot(p2_run, tmp_path):

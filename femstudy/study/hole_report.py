@@ -104,7 +104,8 @@ def _axis(hole: dict) -> str:
 
 
 def verification_lines(hole: dict) -> list[str]:
-    """How the near-hole measures were verified in this run, and what it cost."""
+    """How the near-hole measures were verified on this femur and mesh (in this run, or by an earlier
+    run of the same inputs and code), and what it cost."""
     v = hole.get("verification")
     if not v:
         return ["The near-hole measures were not verified in this run (loads.verify = false): their values carry "
@@ -114,7 +115,10 @@ def verification_lines(hole: dict) -> list[str]:
                 "no verdict and the margins no band.", ""]
     levels = ", ".join(f"{f:.3g}" for f in v["levels"])
     dofs = ", ".join(f"{d:,}" for d in v["dofs"])
-    return [f"**Verification in this run** (docs/failure.md): every measure below was judged on this femur and "
+    made = ("**Verification, made by an earlier run of the same inputs and code and read back by this one** "
+            "(docs/failure.md; docs/solver.md, kept answers)" if v.get("kept_from_earlier_run") else
+            "**Verification in this run** (docs/failure.md)")
+    return [f"{made}: every measure below was judged on this femur and "
             f"mesh by refining the hole models (refinements {levels}, wall elements "
             + ", ".join(f"{h:.3g}" for h in v["measures"][0]["h_mm"]) + " mm; "
             f"{dofs} DOFs; the coarser and finer levels at stations {', '.join(str(s) for s in v['stations'])}, "
@@ -144,8 +148,8 @@ def hole_section(hole: dict) -> list[str]:
              "on the drill-point cone, chip evacuation torque as wall friction and its thrust on the bottom. The "
              "hole's geometry is read off the bone's surfaces, not the global mesh. Maxima over the stations and "
              "over every point at the stated distance from the hole surface (wall and cone; the last column: the "
-             "points beside the cylindrical wall only), each with its verdict and uncertainty measured in this run."
-             f"{_ligament(hole)}{_axis(hole)}", ""]
+             "points beside the cylindrical wall only), each with its verdict and uncertainty measured on this femur "
+             f"and mesh.{_ligament(hole)}{_axis(hole)}", ""]
     lines += verification_lines(hole)
     lines += ["| station | tip depth [mm] | time [s] | cutting thrust [N] | cutting torque [N·mm] | evacuation thrust [N] "
               "| evacuation torque [N·mm] | DOFs | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
