@@ -71,11 +71,14 @@ class Fit:
         return dict(zip(self.layout.names, map(float, self.theta)))
 
 
-def _whitened(problem: Problem, ev: Evaluation, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Whitened residual and derivatives, channels stacked."""
-    r = [problem.whiten(c, problem.y[c] - ev.model[c], rows) for c in range(len(problem.channels))]
-    J = [problem.whiten(c, ev.jacobian[c], rows) for c in range(len(problem.channels))]
-    return np.concatenate(r), np.vstack(J)
+def _whitened_residual(problem: Problem, ev: Evaluation, rows: np.ndarray) -> list[np.ndarray]:
+    """Whitened residual per channel."""
+    return [problem.whiten(c, problem.y[c] - ev.model[c], rows) for c in range(len(problem.channels))]
+
+
+def _whitened_jacobian(problem: Problem, ev: Evaluation, rows: np.ndarray) -> np.ndarray:
+    """Whitened derivatives, channels stacked."""
+    return np.vstack([problem.whiten(c, ev.jacobian[c], rows) for c in range(len(problem.channels))])
 
 
 def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarray | None = None,
@@ -91,7 +94,9 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
     theta = np.clip(theta, lay.lower, lay.upper)
     free = np.array([name not in fixed for name in lay.names])
     ev = evaluate(problem, spec, lay, theta)
-    r, J = _whitened(problem, ev, rows)
+    parts = _whitened_residual(problem, ev, rows)
+    r = np.concatenate(parts)
+    J = _whitened_jacobian(problem, ev, rows)
     chi2 = float(r @ r)
     for _ in range(MAX_ITERATIONS):
         A = J[:, free]
@@ -107,7 +112,8 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         for _ in range(HALVINGS + 1):
             trial = theta + step * (proposal - theta)
             ev_trial = evaluate(problem, spec, lay, trial)
-            r_trial, J_trial = _whitened(problem, ev_trial, rows)
+            parts_trial = _whitened_residual(problem, ev_trial, rows)
+            r_trial = np.concatenate(parts_trial)
             chi2_trial = float(r_trial @ r_trial)
             if chi2_trial <= chi2:
                 accepted = True
@@ -116,11 +122,11 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         if not accepted:
             break
         improvement = chi2 - chi2_trial
-        theta, ev, r, J, chi2 = trial, ev_trial, r_trial, J_trial, chi2_trial
+        theta, ev, parts, r, chi2 = trial, ev_trial, parts_trial, r_trial, chi2_trial
         if improvement <= max(ABSOLUTE_TOLERANCE, TOLERANCE * chi2):
             break
-    chi2_channels = np.array([float(np.sum(problem.whiten(c, problem.y[c] - ev.model[c], rows) ** 2))
-                              for c in range(len(problem.channels))])
+        J = _whitened_jacobian(problem, ev, rows)   # only at accepted parameters that step on
+    chi2_channels = np.array([float(np.sum(part ** 2)) for part in parts])
     active = lay.counted_when_active & (theta > np.where(lay.counted_when_active, lay.lower, 0.0) + 1e-12)
     counted = np.count_nonzero(~lay.counted_when_active & free) + np.count_nonzero(active & free)
     return Fit(spec, lay, theta, chi2_channels, ev.model, float(counted + np.count_nonzero(~free)) + lay.scanned,
