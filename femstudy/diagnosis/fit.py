@@ -3,9 +3,9 @@
 The model (:mod:`.model`) is linear in every mechanism's coefficients and bilinear where a
 mechanism multiplies another (a feed pulsation modulates the clogging load, softening both), so
 Gauss–Newton from zero converges in a few steps. Each step solves the linearised problem
-exactly under the bounds (bounded-variable least squares, :func:`scipy.optimize.lsq_linear` with
-BVLS), so a monotone spline's non-negative coefficients that are not needed sit exactly at zero
-and do not count towards the model's size; a step that raises χ² is halved. Residuals are
+exactly under the bounds (bounded-variable least squares, :func:`.bounded.bvls`), so a monotone
+spline's non-negative coefficients that are not needed sit exactly at zero and do not count
+towards the model's size; a step that raises χ² is halved. Residuals are
 whitened by the noise model (generalised least squares), so the cost is χ².
 
 The size of a fit, for the information criterion: every parameter that is always free (tares,
@@ -19,8 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
+from femstudy.diagnosis.bounded import bvls
 from femstudy.diagnosis.model import Evaluation, ParameterLayout, Spec, evaluate, layout
 from femstudy.diagnosis.problem import Problem
 
@@ -105,9 +105,8 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         A_aug = np.vstack([A, np.sqrt(damping) * np.eye(A.shape[1])])
         b_aug = np.concatenate([b, np.sqrt(damping) * theta[free]])
         Q, R = np.linalg.qr(A_aug)   # the same least squares on p rows instead of n
-        solution = lsq_linear(R, Q.T @ b_aug, bounds=(lay.lower[free], lay.upper[free]), method="bvls")
         proposal = theta.copy()
-        proposal[free] = solution.x
+        proposal[free] = bvls(R, Q.T @ b_aug, lay.lower[free], lay.upper[free])
         step, accepted = 1.0, False
         for _ in range(HALVINGS + 1):
             trial = theta + step * (proposal - theta)
