@@ -29,23 +29,25 @@ from scipy.linalg import get_lapack_funcs
 #: Default tolerance on the KKT conditions and on the relative cost change (lsq_linear's default).
 TOL = 1e-10
 
+_GEQRF, _ORMQR, _TRTRS = get_lapack_funcs(("geqrf", "ormqr", "trtrs"), dtype=np.float64)
+_EPS = float(np.finfo(float).eps)
+
 
 def least_squares(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The least-squares solution of A x ≈ b for A (m × k, m ≥ k) of full column rank."""
     m, k = A.shape
     if k == 0:
         return np.zeros(0)
-    if m < k:
+    if m < k or A.dtype != np.float64:
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    geqrf, ormqr, trtrs = get_lapack_funcs(("geqrf", "ormqr", "trtrs"), (A,))
-    qr, tau, _, info = geqrf(A)
-    diagonal = np.abs(np.diag(qr[:k, :k]))
-    if info != 0 or diagonal.min() <= max(m, k) * np.finfo(float).eps * diagonal.max():
+    qr, tau, _, info = _GEQRF(A)
+    diagonal = np.abs(qr.diagonal())
+    if info != 0 or diagonal.min() <= max(m, k) * _EPS * diagonal.max():
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    qtb, _, info = ormqr("L", "T", qr, tau, b[:, None], max(1, 64 * k))
+    qtb, _, info = _ORMQR("L", "T", qr, tau, b[:, None], max(1, 64 * k))
     if info != 0:
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    x, info = trtrs(qr[:k, :k], qtb[:k, 0])
+    x, info = _TRTRS(qr[:k], qtb[:k, 0])
     return x if info == 0 else np.linalg.lstsq(A, b, rcond=None)[0]
 
 
