@@ -369,7 +369,7 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
             J[c, :, lay.index(f"{name}_tare")] = 1.0
             if problem.calibrate:
                 J[c, :, lay.index(f"{name}_scale")] = P[c] * HU[c]
-        Js = band.smooth_model(J.transpose(0, 2, 1).reshape(n_ch * p, n_t)).reshape(n_ch, p, -1).transpose(0, 2, 1)
+        Js = np.stack([band.smooth_columns(J[c]) for c in range(n_ch)])
         if spec.extra is not None:
             k = first_extra
             for c, columns in enumerate(spec.extra):
