@@ -51,6 +51,15 @@ def least_squares(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x if info == 0 else np.linalg.lstsq(A, b, rcond=None)[0]
 
 
+def triangular(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R and Qᵀb of the Householder QR of A (m × k, m ≥ k): min ‖Ax − b‖ is min ‖Rx − Qᵀb‖ on k
+    rows instead of m (the same R as :func:`numpy.linalg.qr`; Q is applied, never formed)."""
+    k = A.shape[1]
+    qr, tau, _, _ = _GEQRF(A)
+    qtb, _, _ = _ORMQR("L", "T", qr, tau, b[:, None], max(1, 64 * k))
+    return np.triu(qr[:k]), qtb[:k, 0]
+
+
 def _kkt_violation(g: np.ndarray, side: np.ndarray) -> float:
     """Largest violation of the optimality conditions: |g| on a free variable, g·side on a bound
     (side −1 lower, +1 upper: positive when moving inside would lower the cost)."""

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from femstudy.diagnosis.bounded import bvls
+from femstudy.diagnosis.bounded import bvls, triangular
 from femstudy.diagnosis.model import Evaluation, ParameterLayout, Spec, evaluate, layout
 from femstudy.diagnosis.problem import Problem
 
@@ -104,9 +104,9 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         damping = DAMPING * max(float(np.mean(np.einsum("ij,ij->j", A, A))), 1e-300)
         A_aug = np.vstack([A, np.sqrt(damping) * np.eye(A.shape[1])])
         b_aug = np.concatenate([b, np.sqrt(damping) * theta[free]])
-        Q, R = np.linalg.qr(A_aug)   # the same least squares on p rows instead of n
+        R, c = triangular(A_aug, b_aug)   # the same least squares on p rows instead of n
         proposal = theta.copy()
-        proposal[free] = bvls(R, Q.T @ b_aug, lay.lower[free], lay.upper[free])
+        proposal[free] = bvls(R, c, lay.lower[free], lay.upper[free])
         step, accepted = 1.0, False
         for _ in range(HALVINGS + 1):
             trial = theta + step * (proposal - theta)
