@@ -76,9 +76,7 @@ def bvls(A: np.ndarray, b: np.ndarray, lower: np.ndarray, upper: np.ndarray, tol
     side[x <= lower], side[x >= upper] = -1.0, 1.0
     x = np.clip(x, lower, upper)
     free = np.flatnonzero(side == 0)
-    steps = 0
     while free.size:                       # 2. the start
-        steps += 1
         z = least_squares(A[:, free], b - A @ np.where(side != 0, x, 0.0))
         low, high = z < lower[free], z > upper[free]
         x[free[low]], side[free[low]] = lower[free[low]], -1.0
