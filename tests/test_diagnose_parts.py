@@ -171,3 +171,38 @@ def test_mis_scaled_simulation_is_a_calibration_not_missing_physics():
     assert js["missing_physics"] == [] and js["mismatch"]
     assert js["calibration"]["thrust_N_scale"] == pytest.approx(1 / 0.95, rel=0.01)
     assert js["calibration"]["torque_Nmm_scale"] == pytest.approx(1 / 0.95, rel=0.01)
+
+
+def test_model_derivatives_match_finite_differences_in_every_coefficient():
+    """All four mechanisms together (clogging with its after-breakthrough columns, a drift, a
+    softening that spares the packed chips' friction, a pulsed feed): the derivatives the fits use
+    equal central differences of the model to 1e-6 of the column's size in every parameter that
+    does not move the clock (the shift, the pulsation's phase-setting coefficients and frequency
+    move it through the simulated loads' slopes, which are differenced on the model grid)."""
+    from femstudy.diagnosis.catalogue import MECHANISMS
+
+    rec = synthesize(1.5, 1500, model="allotta", effects=Effects.none(), seed=3)
+    sim = synthesize(1.5, 1500, model="allotta", effects=Effects.none())
+    problem, _ = build_problem(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
+    chosen = [(n, MECHANISMS[n].variants(problem, None, None)[-1]) for n in ("chip_clogging", "sensor_drift", "thermal_softening")]
+    spec = Spec(tuple(chosen) + (("feed_pulsation", Variant((("frequency_hz", 0.7), ("sweep", 0.0), ("harmonics", 1)))),))
+    lay = layout(problem, spec)
+    rng = np.random.default_rng(0)
+    theta = lay.start.copy()
+    bounded = np.isfinite(lay.lower) & np.isfinite(lay.upper)
+    theta[bounded] = lay.lower[bounded] + (lay.upper[bounded] - lay.lower[bounded]) * rng.uniform(0.3, 0.4, bounded.sum())
+    theta[[k for k, n in enumerate(lay.names) if n.startswith("chip_clogging.") and "torque" not in n]] = 0.05
+    J = evaluate(problem, spec, lay, theta).jacobian
+    clock = {"shift_correction_s", "feed_pulsation.a1", "feed_pulsation.b1", "feed_pulsation.frequency_hz"}
+    checked = 0
+    for k, name in enumerate(lay.names):
+        if name in clock:
+            continue
+        h = 1e-6 * max(1.0, abs(theta[k]))
+        up, down = theta.copy(), theta.copy()
+        up[k] += h
+        down[k] -= h
+        fd = (evaluate(problem, spec, lay, up).model - evaluate(problem, spec, lay, down).model) / (2 * h)
+        assert np.max(np.abs(J[:, :, k] - fd)) <= 1e-6 * max(np.max(np.abs(fd)), 1.0), name
+        checked += 1
+    assert checked == len(lay.names) - len(clock)

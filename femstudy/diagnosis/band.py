@@ -100,6 +100,11 @@ class Band:
         """A model on ``t_model`` (last axis) at the decimated instants."""
         return (self.on_model @ np.atleast_2d(y).T).T.reshape(np.shape(y)[:-1] + (self.t_dec.size,))
 
+    def smooth_columns(self, x: np.ndarray) -> np.ndarray:
+        """Columns of a model on ``t_model`` (instants on axis 0, e.g. its derivatives) at the
+        decimated instants: the same sums as :meth:`smooth_model`, without transposing."""
+        return self.on_model @ x
+
 
 def make_band(t: np.ndarray, spindle_rpm: float, start_s: float, end_s: float) -> Band:
     """The band for recording times ``t`` restricted to [start_s, end_s]. A short window gets

@@ -3,9 +3,9 @@
 The model (:mod:`.model`) is linear in every mechanism's coefficients and bilinear where a
 mechanism multiplies another (a feed pulsation modulates the clogging load, softening both), so
 Gauss–Newton from zero converges in a few steps. Each step solves the linearised problem
-exactly under the bounds (bounded-variable least squares, :func:`scipy.optimize.lsq_linear` with
-BVLS), so a monotone spline's non-negative coefficients that are not needed sit exactly at zero
-and do not count towards the model's size; a step that raises χ² is halved. Residuals are
+exactly under the bounds (bounded-variable least squares, :func:`.bounded.bvls`), so a monotone
+spline's non-negative coefficients that are not needed sit exactly at zero and do not count
+towards the model's size; a step that raises χ² is halved. Residuals are
 whitened by the noise model (generalised least squares), so the cost is χ².
 
 The size of a fit, for the information criterion: every parameter that is always free (tares,
@@ -19,8 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
+from femstudy.diagnosis.bounded import bvls, triangular
 from femstudy.diagnosis.model import Evaluation, ParameterLayout, Spec, evaluate, layout
 from femstudy.diagnosis.problem import Problem
 
@@ -71,11 +71,14 @@ class Fit:
         return dict(zip(self.layout.names, map(float, self.theta)))
 
 
-def _whitened(problem: Problem, ev: Evaluation, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Whitened residual and derivatives, channels stacked."""
-    r = [problem.whiten(c, problem.y[c] - ev.model[c], rows) for c in range(len(problem.channels))]
-    J = [problem.whiten(c, ev.jacobian[c], rows) for c in range(len(problem.channels))]
-    return np.concatenate(r), np.vstack(J)
+def _whitened_residual(problem: Problem, ev: Evaluation, rows: np.ndarray) -> list[np.ndarray]:
+    """Whitened residual per channel."""
+    return [problem.whiten(c, problem.y[c] - ev.model[c], rows) for c in range(len(problem.channels))]
+
+
+def _whitened_jacobian(problem: Problem, ev: Evaluation, rows: np.ndarray) -> np.ndarray:
+    """Whitened derivatives, channels stacked."""
+    return np.vstack([problem.whiten(c, ev.jacobian[c], rows) for c in range(len(problem.channels))])
 
 
 def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarray | None = None,
@@ -91,7 +94,9 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
     theta = np.clip(theta, lay.lower, lay.upper)
     free = np.array([name not in fixed for name in lay.names])
     ev = evaluate(problem, spec, lay, theta)
-    r, J = _whitened(problem, ev, rows)
+    parts = _whitened_residual(problem, ev, rows)
+    r = np.concatenate(parts)
+    J = _whitened_jacobian(problem, ev, rows)
     chi2 = float(r @ r)
     for _ in range(MAX_ITERATIONS):
         A = J[:, free]
@@ -99,15 +104,15 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         damping = DAMPING * max(float(np.mean(np.einsum("ij,ij->j", A, A))), 1e-300)
         A_aug = np.vstack([A, np.sqrt(damping) * np.eye(A.shape[1])])
         b_aug = np.concatenate([b, np.sqrt(damping) * theta[free]])
-        Q, R = np.linalg.qr(A_aug)   # the same least squares on p rows instead of n
-        solution = lsq_linear(R, Q.T @ b_aug, bounds=(lay.lower[free], lay.upper[free]), method="bvls")
+        R, c = triangular(A_aug, b_aug)   # the same least squares on p rows instead of n
         proposal = theta.copy()
-        proposal[free] = solution.x
+        proposal[free] = bvls(R, c, lay.lower[free], lay.upper[free])
         step, accepted = 1.0, False
         for _ in range(HALVINGS + 1):
             trial = theta + step * (proposal - theta)
             ev_trial = evaluate(problem, spec, lay, trial)
-            r_trial, J_trial = _whitened(problem, ev_trial, rows)
+            parts_trial = _whitened_residual(problem, ev_trial, rows)
+            r_trial = np.concatenate(parts_trial)
             chi2_trial = float(r_trial @ r_trial)
             if chi2_trial <= chi2:
                 accepted = True
@@ -116,11 +121,11 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         if not accepted:
             break
         improvement = chi2 - chi2_trial
-        theta, ev, r, J, chi2 = trial, ev_trial, r_trial, J_trial, chi2_trial
+        theta, ev, parts, r, chi2 = trial, ev_trial, parts_trial, r_trial, chi2_trial
         if improvement <= max(ABSOLUTE_TOLERANCE, TOLERANCE * chi2):
             break
-    chi2_channels = np.array([float(np.sum(problem.whiten(c, problem.y[c] - ev.model[c], rows) ** 2))
-                              for c in range(len(problem.channels))])
+        J = _whitened_jacobian(problem, ev, rows)   # only at accepted parameters that step on
+    chi2_channels = np.array([float(np.sum(part ** 2)) for part in parts])
     active = lay.counted_when_active & (theta > np.where(lay.counted_when_active, lay.lower, 0.0) + 1e-12)
     counted = np.count_nonzero(~lay.counted_when_active & free) + np.count_nonzero(active & free)
     return Fit(spec, lay, theta, chi2_channels, ev.model, float(counted + np.count_nonzero(~free)) + lay.scanned,

@@ -30,7 +30,9 @@ them, both smoothed to the band's instants.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -198,15 +200,21 @@ def _fall(problem: Problem, frame: Frame, thrust: np.ndarray, stop_tau: float) -
     return np.where(after, np.clip(thrust / at_stop, 0.0, 1.0), 1.0)
 
 
-def _rise(S: np.ndarray, dS: np.ndarray, engaged: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _rise(S: np.ndarray, engaged: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """R = S·q, q the largest share 1 − S_o/S of the load above its engaged value so far: S − S_o
     while the load rises, and the same share of the load once it falls (after breakthrough the
-    packed chips' friction leaves with the cut); and dR/dτ."""
+    packed chips' friction leaves with the cut); with q and where the share is rising, from which
+    dR/dτ = dS/dτ while it rises and q dS/dτ after (:func:`_rise_slope`)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(S > engaged[:, None], 1.0 - engaged[:, None] / S, 0.0)
     held = np.maximum.accumulate(share, axis=1)
     rising = (share >= held) & (share > 0)
-    return S * held, np.where(rising, dS, dS * held)
+    return S * held, held, rising
+
+
+def _rise_slope(dS: np.ndarray, held: np.ndarray, rising: np.ndarray) -> np.ndarray:
+    """dR/dτ from dS/dτ and what :func:`_rise` returns."""
+    return np.where(rising, dS, dS * held)
 
 
 def _loads(problem: Problem, tau: np.ndarray, stop_tau: float) -> np.ndarray:
@@ -218,21 +226,36 @@ def _loads(problem: Problem, tau: np.ndarray, stop_tau: float) -> np.ndarray:
 class Evaluation:
     """The model at some parameters: smoothed to the band's instants (channels × instants), its
     derivatives (channels × instants × parameters), the frame, and the modelled loads g·H·P·U on
-    the model grid (no tare, drift or extra columns)."""
+    the model grid (no tare, drift or extra columns).
+
+    The derivatives and the slopes are computed when first read (``derivatives``): a fit reads
+    them only at the parameters it accepts, not at a trial step it rejects."""
 
     model: np.ndarray
-    jacobian: np.ndarray
     frame: Frame
     loads: np.ndarray
-    slopes: np.ndarray       #: g·H·P·dU/dτ on the model grid (for scans of a feed modulation)
     grid: np.ndarray         #: the model on the model grid, without extra columns (for figures)
+    derivatives: Callable[[], tuple[np.ndarray, np.ndarray]] = field(repr=False, compare=False)
+
+    @functools.cached_property
+    def _derived(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.derivatives()
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        """Derivatives of :attr:`model` in every parameter (channels × instants × parameters)."""
+        return self._derived[0]
+
+    @property
+    def slopes(self) -> np.ndarray:
+        """g·H·P·dU/dτ on the model grid (for scans of a feed modulation)."""
+        return self._derived[1]
 
 
 def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarray) -> Evaluation:
-    """The model and its derivatives at ``theta`` (see :class:`Evaluation`)."""
+    """The model at ``theta``, and its derivatives when read (see :class:`Evaluation`)."""
     t = problem.band.t_model
     n_ch, n_t, p = len(problem.channels), t.size, theta.size
-    J = np.zeros((n_ch, n_t, p))
     shift = problem.shift_s + theta[0]
     sim = problem.simulation
     model_sim = isinstance(sim, ModelSimulation)
@@ -241,60 +264,47 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
         stop_tau = stop_tau + theta[1] / problem.geometry.feed_mm_s
     terms: dict[str, Term] = {}
     values = {name: theta[block] for name, block in lay.blocks.items()}
+    roles = {name: MECHANISMS[name].role for name in lay.blocks}
 
     # FEED: the lead and the load modulation (on the recording's clock, before the frame exists)
     lead = np.zeros(n_t)
-    lead_jac = np.zeros((n_t, p))
     m = np.zeros((n_ch, n_t))
-    m_jac = np.zeros((n_ch, n_t, p))
     provisional, _ = _frame(problem, shift, stop_tau, lead)
-    for name, block in lay.blocks.items():
-        mech = MECHANISMS[name]
-        if mech.role is Role.FEED:
-            term = mech.term(problem, provisional, spec.variant(name), values[name])
+    for name in lay.blocks:
+        if roles[name] is Role.FEED:
+            term = MECHANISMS[name].term(problem, provisional, spec.variant(name), values[name])
             terms[name] = term
             lead += term.lead
-            lead_jac[:, block] += term.lead_jacobian
             m += term.value
-            m_jac[:, :, block] += term.jacobian
     frame, k_stop = _frame(problem, shift, stop_tau, lead)
-    if k_stop is not None:   # the lead is frozen and the modulation ends once the feed stops
-        after = t > frame.stop_t_s
-        lead_jac[after] = lead_jac[max(k_stop - 1, 0)]
     on = frame.cutting.astype(float)
     m = m * on
-    m_jac = m_jac * on[None, :, None]
 
-    # the simulated load on the drill's clock, and its slope in τ
-    h = 0.25 * float(t[1] - t[0])
+    # the simulated load on the drill's clock
     S = _loads(problem, frame.tau, stop_tau)
-    dS = (_loads(problem, frame.tau + h, stop_tau) - _loads(problem, frame.tau - h, stop_tau)) / (2 * h)
     frame = replace(frame, fall=_fall(problem, frame, S[0], stop_tau))
-    R, dR = np.zeros_like(S), np.zeros_like(S)
-    if GAIN_SPARES in lay.names and problem.simulated_rise > MATERIAL_RISE:
-        R, dR = _rise(S, dS, problem.engaged_loads)
-    C, dC = np.zeros_like(S), np.zeros_like(S)
-    for name, block in lay.blocks.items():
-        mech = MECHANISMS[name]
-        if mech.role is Role.LOAD:
-            term = mech.term(problem, frame, spec.variant(name), values[name])
+    rise = GAIN_SPARES in lay.names and problem.simulated_rise > MATERIAL_RISE
+    R = np.zeros_like(S)
+    if rise:
+        R, held, rising = _rise(S, problem.engaged_loads)
+    C = np.zeros_like(S)
+    for name in lay.blocks:
+        if roles[name] is Role.LOAD:
+            term = MECHANISMS[name].term(problem, frame, spec.variant(name), values[name])
             terms[name] = term
             C += term.value
-            dC += np.gradient(term.value, frame.tau, axis=1) if np.ptp(frame.tau) > 0 else 0.0
-            J[:, :, block] += term.jacobian   # multiplied by g·P·H_φ below
     P = 1.0 + m
     s_gain = np.zeros((n_ch, n_t))
     A = np.zeros((n_ch, n_t))
-    for name, block in lay.blocks.items():
-        mech = MECHANISMS[name]
-        if mech.role is Role.GAIN:
-            term = mech.term(problem, frame, spec.variant(name), values[name])
+    for name in lay.blocks:
+        if roles[name] is Role.GAIN:
+            term = MECHANISMS[name].term(problem, frame, spec.variant(name), values[name])
             terms[name] = term
             s_gain += term.value
-        elif mech.role is Role.SENSOR:
-            term = mech.term(problem, frame, spec.variant(name), values[name])
+        elif roles[name] is Role.SENSOR:
+            term = MECHANISMS[name].term(problem, frame, spec.variant(name), values[name])
+            terms[name] = term
             A += term.value
-            J[:, :, block] += term.jacobian
     phi = 1.0 - theta[lay.index(GAIN_SPARES)] if GAIN_SPARES in lay.names else 1.0
     H, H_phi = 1.0 - s_gain, 1.0 - phi * s_gain
     g = np.ones(n_ch)
@@ -302,40 +312,70 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
         g = np.array([theta[lay.index(f"{c}_scale")] for c in problem.channels])
     gP = g[:, None] * P
     HU = H * (S - R) + H_phi * (R + C)    # the loads with their losses
-    dHU = H * (dS - dR) + H_phi * (dR + dC)
     core = gP * HU
     tares = np.array([theta[lay.index(f"{c}_tare")] for c in problem.channels])
     model = core + A + tares[:, None]
-
-    # derivatives
-    for name, block in lay.blocks.items():
-        mech = MECHANISMS[name]
-        if mech.role is Role.LOAD:
-            J[:, :, block] *= (gP * H_phi)[:, :, None]
-        elif mech.role is Role.GAIN:
-            J[:, :, block] -= (gP * (S - R + phi * (R + C)))[:, :, None] * terms[name].jacobian
-    if GAIN_SPARES in lay.names:
-        J[:, :, lay.index(GAIN_SPARES)] = gP * s_gain * (R + C)
-    # FEED: through the modulation and through the lead (τ' moves with δ)
-    J += (g[:, None] * HU)[:, :, None] * m_jac + (gP * dHU)[:, :, None] * lead_jac[None, :, :]
-    J[:, :, 0] = -gP * dHU
-    if model_sim:
-        hs = 0.02
-        up = _loads(problem, frame.tau, stop_tau + hs / problem.geometry.feed_mm_s)
-        down = _loads(problem, frame.tau, stop_tau - hs / problem.geometry.feed_mm_s)
-        J[:, :, 1] = gP * H * (up - down) / (2 * hs)
-    for c, name in enumerate(problem.channels):
-        J[c, :, lay.index(f"{name}_tare")] = 1.0
-        if problem.calibrate:
-            J[c, :, lay.index(f"{name}_scale")] = P[c] * HU[c]
     band = problem.band
     ms = band.smooth_model(model)
-    Js = band.smooth_model(J.transpose(0, 2, 1).reshape(n_ch * p, n_t)).reshape(n_ch, p, -1).transpose(0, 2, 1)
+    first_extra = len(lay.names) - (sum(len(cols) for cols in spec.extra) if spec.extra is not None else 0)
     if spec.extra is not None:
-        k = len(lay.names) - sum(len(cols) for cols in spec.extra)
+        k = first_extra
         for c, columns in enumerate(spec.extra):
             for column in columns:
-                Js[c, :, k] = column
                 ms[c] += theta[k] * column
                 k += 1
-    return Evaluation(ms, Js, frame, core, gP * dHU, model)
+
+    def derivatives() -> tuple[np.ndarray, np.ndarray]:
+        """The smoothed Jacobian and the slopes g·H·P·dU/dτ."""
+        J = np.zeros((n_ch, n_t, p))
+        h = 0.25 * float(t[1] - t[0])
+        dS = (_loads(problem, frame.tau + h, stop_tau) - _loads(problem, frame.tau - h, stop_tau)) / (2 * h)
+        dR = _rise_slope(dS, held, rising) if rise else np.zeros_like(S)
+        dC = np.zeros_like(S)
+        for name, block in lay.blocks.items():
+            if roles[name] is Role.LOAD:
+                dC += np.gradient(terms[name].value, frame.tau, axis=1) if np.ptp(frame.tau) > 0 else 0.0
+                J[:, :, block] += terms[name].jacobian   # multiplied by g·P·H_φ below
+            elif roles[name] is Role.SENSOR:
+                J[:, :, block] += terms[name].jacobian
+        dHU = H * (dS - dR) + H_phi * (dR + dC)
+        for name, block in lay.blocks.items():
+            if roles[name] is Role.LOAD:
+                J[:, :, block] *= (gP * H_phi)[:, :, None]
+            elif roles[name] is Role.GAIN:
+                J[:, :, block] -= (gP * (S - R + phi * (R + C)))[:, :, None] * terms[name].jacobian
+        if GAIN_SPARES in lay.names:
+            J[:, :, lay.index(GAIN_SPARES)] = gP * s_gain * (R + C)
+        # FEED: through the modulation and through the lead (τ' moves with δ); the lead is frozen
+        # and the modulation ends once the feed stops
+        for name, block in lay.blocks.items():
+            if roles[name] is Role.FEED:
+                width = block.stop - block.start
+                lead_jac = np.zeros((n_t, width))
+                lead_jac += terms[name].lead_jacobian
+                m_jac = np.zeros((n_ch, n_t, width))
+                m_jac += terms[name].jacobian
+                if k_stop is not None:
+                    lead_jac[t > frame.stop_t_s] = lead_jac[max(k_stop - 1, 0)]
+                m_jac = m_jac * on[None, :, None]
+                J[:, :, block] += (g[:, None] * HU)[:, :, None] * m_jac + (gP * dHU)[:, :, None] * lead_jac[None, :, :]
+        J[:, :, 0] = -gP * dHU
+        if model_sim:
+            hs = 0.02
+            up = _loads(problem, frame.tau, stop_tau + hs / problem.geometry.feed_mm_s)
+            down = _loads(problem, frame.tau, stop_tau - hs / problem.geometry.feed_mm_s)
+            J[:, :, 1] = gP * H * (up - down) / (2 * hs)
+        for c, name in enumerate(problem.channels):
+            J[c, :, lay.index(f"{name}_tare")] = 1.0
+            if problem.calibrate:
+                J[c, :, lay.index(f"{name}_scale")] = P[c] * HU[c]
+        Js = np.stack([band.smooth_columns(J[c]) for c in range(n_ch)])
+        if spec.extra is not None:
+            k = first_extra
+            for c, columns in enumerate(spec.extra):
+                for column in columns:
+                    Js[c, :, k] = column
+                    k += 1
+        return Js, gP * dHU
+
+    return Evaluation(ms, frame, core, model, derivatives)

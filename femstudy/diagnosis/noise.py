@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import linalg, ndimage, optimize, signal
+from scipy.linalg import blas
 
 from femstudy.diagnosis.band import gaussian_operator
 
@@ -253,26 +254,32 @@ class Whitener:
 
     ``rows`` restricts to a subset of instants (held-out folds); its factor is cached. L⁻¹ is
     formed once (a few hundred instants) and applied as a matrix product, which is far faster
-    than a triangular solve per residual evaluation."""
+    than a triangular solve per residual evaluation; to many columns at once (a model's
+    derivatives) as a triangular one (BLAS trmm), half the work of a dense product."""
 
     def __init__(self, covariance: np.ndarray):
         self.covariance = covariance
         self.sd = np.sqrt(np.diag(covariance))
         self._inverse_factors: dict = {}
 
-    def _inverse_factor(self, rows: np.ndarray | None) -> np.ndarray:
+    def _inverse_factor(self, rows: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """L⁻¹ over ``rows``, and the same in Fortran order for BLAS."""
         key = None if rows is None else rows.tobytes()
         if key not in self._inverse_factors:
             c = self.covariance if rows is None else self.covariance[np.ix_(rows, rows)]
             jitter = 1e-10 * float(np.mean(np.diag(c)))
             factor = linalg.cholesky(c + jitter * np.eye(c.shape[0]), lower=True)
-            self._inverse_factors[key] = linalg.solve_triangular(factor, np.eye(c.shape[0]), lower=True)
+            inverse = linalg.solve_triangular(factor, np.eye(c.shape[0]), lower=True)
+            self._inverse_factors[key] = (inverse, np.asfortranarray(inverse))
         return self._inverse_factors[key]
 
     def whiten(self, x: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
         """L⁻¹ x over ``rows`` (boolean mask, default all); ``x`` has instants on axis 0."""
         x = x if rows is None else x[rows]
-        return self._inverse_factor(rows) @ x
+        inverse, fortran = self._inverse_factor(rows)
+        if x.ndim == 2 and x.shape[1] > 1 and x.shape[0] > 0 and x.dtype == np.float64:
+            return blas.dtrmm(1.0, fortran, x, lower=1)
+        return inverse @ x
 
 
 def smoothed_covariance(model: NoiseSpectrum, t_dec: np.ndarray, sigma_g: float, gain: np.ndarray) -> np.ndarray:

@@ -231,8 +231,8 @@ class FeedPulsation:
         k = 2 * h
         m = w @ theta[:k]
         # ∂m/∂φ, and φ's derivatives in the frequency and the sweep
-        dm = np.column_stack([k_ * np.cos(k_ * phi) * theta[2 * i] - k_ * np.sin(k_ * phi) * theta[2 * i + 1]
-                              for i, k_ in enumerate(harmonics)]).sum(axis=1)
+        dm = np.column_stack([k_ * w[:, 2 * i + 1] * theta[2 * i] - k_ * w[:, 2 * i] * theta[2 * i + 1]
+                              for i, k_ in enumerate(harmonics)]).sum(axis=1)   # w holds sin kφ, cos kφ
         half = problem.cut_s / 2
         u = t - (problem.contact_t + half)
         extra = [dm * (2 * math.pi * u + math.pi * sweep * u ** 2 / half)]
