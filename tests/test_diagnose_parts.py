@@ -31,6 +31,14 @@ def test_noise_level_ignores_spindle_ripple_and_the_cut():
     assert white_noise_sigma(rec.time_s, rec.torque_Nmm - clean.torque_Nmm) == pytest.approx(1.3, rel=0.05)
 
 
+def test_a_residual_without_noise_has_level_zero_not_nan():
+    """A simulation that matches a noise-free recording exactly leaves a zero residual: its
+    spectrum is flat zero, every bin of it 'a line'; the level is 0 (the noise floor then
+    applies), not the NaN of an empty mean."""
+    t = np.arange(4000) / 1000
+    assert white_noise_sigma(t, np.zeros(t.size)) == 0.0
+
+
 def test_smoothing_is_the_same_on_recording_samples_and_on_the_model_grid():
     """The same continuous kernel on a 1 kHz recording and a ~85 Hz model grid: a clean
     recording and its own model, smoothed each way, agree to under 0.2 noise units, and the

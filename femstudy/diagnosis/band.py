@@ -139,5 +139,7 @@ def white_noise_sigma(t: np.ndarray, residual: np.ndarray) -> float:
     if not np.any(band):
         band = f > 0
     level = psd[band]
-    level = level[level < 3 * np.median(level)]  # without the spindle lines
+    lines = level >= 3 * np.median(level)  # the spindle lines
+    if not np.all(lines):  # (a residual without noise has a flat zero spectrum: all of it "lines")
+        level = level[~lines]
     return float(math.sqrt(np.mean(level) * fs / 2))
