@@ -33,6 +33,16 @@ _GEQRF, _ORMQR, _TRTRS = get_lapack_funcs(("geqrf", "ormqr", "trtrs"), dtype=np.
 _EPS = float(np.finfo(float).eps)
 
 
+def _householder(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """LAPACK's Householder QR of A (m × k, m ≥ k) in its compact form, and Qᵀb (m,) with Q
+    applied, never formed; None when LAPACK reports an error."""
+    qr, tau, _, info = _GEQRF(A)
+    if info != 0:
+        return None
+    qtb, _, info = _ORMQR("L", "T", qr, tau, b[:, None], max(1, 64 * A.shape[1]))
+    return None if info != 0 else (qr, qtb[:, 0])
+
+
 def least_squares(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The least-squares solution of A x ≈ b for A (m × k, m ≥ k) of full column rank."""
     m, k = A.shape
@@ -40,14 +50,14 @@ def least_squares(A: np.ndarray, b: np.ndarray) -> np.ndarray:
         return np.zeros(0)
     if m < k or A.dtype != np.float64:
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    qr, tau, _, info = _GEQRF(A)
+    found = _householder(A, b)
+    if found is None:
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    qr, qtb = found
     diagonal = np.abs(qr.diagonal())
-    if info != 0 or diagonal.min() <= max(m, k) * _EPS * diagonal.max():
+    if diagonal.min() <= max(m, k) * _EPS * diagonal.max():
         return np.linalg.lstsq(A, b, rcond=None)[0]
-    qtb, _, info = _ORMQR("L", "T", qr, tau, b[:, None], max(1, 64 * k))
-    if info != 0:
-        return np.linalg.lstsq(A, b, rcond=None)[0]
-    x, info = _TRTRS(qr[:k], qtb[:k, 0])
+    x, info = _TRTRS(qr[:k], qtb[:k])
     return x if info == 0 else np.linalg.lstsq(A, b, rcond=None)[0]
 
 
@@ -55,9 +65,8 @@ def triangular(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """R and Qᵀb of the Householder QR of A (m × k, m ≥ k): min ‖Ax − b‖ is min ‖Rx − Qᵀb‖ on k
     rows instead of m (the same R as :func:`numpy.linalg.qr`; Q is applied, never formed)."""
     k = A.shape[1]
-    qr, tau, _, _ = _GEQRF(A)
-    qtb, _, _ = _ORMQR("L", "T", qr, tau, b[:, None], max(1, 64 * k))
-    return np.triu(qr[:k]), qtb[:k, 0]
+    qr, qtb = _householder(A, b)
+    return np.triu(qr[:k]), qtb[:k]
 
 
 def _kkt_violation(g: np.ndarray, side: np.ndarray) -> float:
