@@ -8,7 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 
 @dataclass(frozen=True)
@@ -22,7 +21,11 @@ class Distribution:
     source: str
 
     def frozen(self):
-        """The scipy.stats distribution (None for ``fixed``)."""
+        """The scipy.stats distribution (None for ``fixed``). scipy.stats is imported here, not
+        at module level: every case file reads this module's INPUTS, and scipy.stats costs
+        ~0.5 s of start-up that only an uncertainty study needs."""
+        from scipy import stats
+
         if self.kind == "normal":
             return stats.norm(self.params[0], self.params[1])
         if self.kind == "lognormal":
