@@ -6,12 +6,15 @@ import pickle
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
 import skfem
 from skfem.helpers import dot
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from femstudy.errors import UserError
 from femstudy.fe import assemble, factorize, fix_facets, solve_static
+from femstudy.fe.constraints import Constraints
+from femstudy.fe.static import free_block, free_nodes
 from femstudy.fe.linsolve import rigid_body_modes
 from femstudy.fe.materials import CORTICAL_TRANSVERSELY_ISOTROPIC, TransverselyIsotropic, isotropic_stiffness
 from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
@@ -137,3 +140,22 @@ def test_free_blocks_are_the_restrictions_of_k_and_m_on_one_pattern():
     assert abs(fs.K - system.K[free][:, free]).max() == 0 and abs(fs.M - system.M[free][:, free]).max() == 0
     assert np.array_equal(fs.K.indptr, fs.M.indptr) and np.array_equal(fs.K.indices, fs.M.indices)
     assert fs.K.has_sorted_indices
+    assert fs.stiffness.format == "bsr" and fs.stiffness.blocksize == (3, 3)  # clamps hold whole nodes
+
+
+def test_clamps_holding_part_of_a_node_restrict_entries_and_both_paths_solve_alike():
+    system = assemble(two_region_bar())
+    whole = fix_facets(system, system.mesh.boundary_facets()[:3])
+    fixed = np.append(whole.fixed, whole.free[0])  # one more DOF: a node held in x only
+    partial = Constraints(fixed, np.setdiff1d(np.arange(system.n_dofs), fixed), whole.facets)
+    assert free_nodes(whole) is not None and free_nodes(partial) is None
+    f = np.zeros(system.n_dofs)
+    f[2::3] = 1.0
+    for bc, form in ((whole, "bsr"), (partial, "csr")):
+        fs = factorize(system, bc, precision="single")
+        assert fs.stiffness.format == form
+        assert abs(fs.K - free_block(system.K, bc.free)).max() == 0
+        reference = spsolve(system.K[bc.free][:, bc.free].tocsc(), f[bc.free])
+        u = solve_static(fs, f)
+        assert np.abs(u[bc.free] - reference).max() < 1e-10 * np.abs(reference).max()
+        assert np.all(u[bc.fixed] == 0)

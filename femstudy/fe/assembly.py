@@ -76,9 +76,11 @@ class FESystem:
     nodes        : (n_nodes, 3) node coordinates [mm] (vertices, then P2 edge mid-points)
     cells        : (n_tets, nbf) node indices of every element, scikit-fem's local order
     region       : (n_tets,) region code per element
+    K_blocks     : the stiffness [N/mm] as it is assembled: BSR of 3×3 node blocks on the node
+                   pattern (what a static solve restricts and factorises, with no conversion)
     K, M         : (3 n_nodes)² CSR stiffness [N/mm] and consistent mass [tonne]; they share
-                   one sparsity pattern (M keeps explicit zeros), so K + c M is an array sum.
-                   M is formed from M_nodes when first asked for (a static solve never is)
+                   one sparsity pattern (both keep their blocks' explicit zeros), so K + c M is
+                   an array sum. Each is formed when first asked for (a static solve needs neither)
     M_nodes      : (n_nodes)² CSR scalar mass [tonne]: M = M_nodes ⊗ I₃, so M u is
                    ``M_nodes @ u.reshape(-1, 3)`` with a ninth of the entries
     dofs         : scikit-fem's vector DOF numbering (node n carries 3n…3n+2), made when asked for
@@ -92,16 +94,20 @@ class FESystem:
     cells: np.ndarray
     region: np.ndarray
     materials: ElementMaterials
-    K: sp.csr_matrix
+    K_blocks: sp.bsr_matrix
     point_index: np.ndarray
     M_nodes: sp.csr_matrix
     timings: dict[str, float] = field(default_factory=dict)
 
     @cached_property
+    def K(self) -> sp.csr_matrix:
+        return self.K_blocks.tocsr()
+
+    @cached_property
     def M(self) -> sp.csr_matrix:
         n_nodes = len(self.nodes)
-        return _block_matrix(self.M_nodes.data[:, None, None] * np.eye(3), self.M_nodes.indptr,
-                             self.M_nodes.indices, n_nodes)
+        return _blocks(self.M_nodes.data[:, None, None] * np.eye(3), self.M_nodes.indptr,
+                       self.M_nodes.indices, n_nodes).tocsr()
 
     @cached_property
     def dofs(self) -> skfem.assembly.Dofs:
@@ -204,8 +210,10 @@ def element_stiffness(S: np.ndarray, invJ: np.ndarray, det: np.ndarray, C: np.nd
     return S @ C_ref
 
 
-def _block_matrix(blocks: np.ndarray, indptr, indices, n_nodes: int) -> sp.csr_matrix:
-    return sp.bsr_matrix((blocks, indices, indptr), shape=(3 * n_nodes, 3 * n_nodes)).tocsr()
+def _blocks(blocks: np.ndarray, indptr, indices, n_nodes: int) -> sp.bsr_matrix:
+    matrix = sp.bsr_matrix((blocks, indices, indptr), shape=(3 * n_nodes, 3 * n_nodes))
+    matrix.has_sorted_indices = True  # the node pattern's rows are sorted
+    return matrix
 
 
 def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int = 2,
@@ -273,13 +281,12 @@ def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int =
         blocks += scatter @ Ke.reshape(pairs, 9)
         nodal_mass += scatter @ Me.ravel()
     t3 = time.perf_counter()
-    K = _block_matrix(blocks.reshape(nnzb, 3, 3), indptr, indices, n_nodes)
-    del blocks
+    K_blocks = _blocks(blocks.reshape(nnzb, 3, 3), indptr, indices, n_nodes)
     M_nodes = sp.csr_matrix((nodal_mass, indices, indptr), shape=(n_nodes, n_nodes))
     t4 = time.perf_counter()
     timings = {"setup_s": t1 - t0, "pattern_s": t2 - t1, "elements_s": t3 - t2, "matrices_s": t4 - t3,
                "total_s": t4 - t0}
-    system = FESystem(skmesh, ref, nodes, cells, np.asarray(mesh.region), mats, K, point_index,
+    system = FESystem(skmesh, ref, nodes, cells, np.asarray(mesh.region), mats, K_blocks, point_index,
                       M_nodes, timings)
     log.info("assembled %s", system.summary())
     return system
