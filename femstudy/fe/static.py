@@ -137,15 +137,17 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
     >>> fs = factorize(system, bc)                      # doctest: +SKIP
     >>> u = solve_static(fs, patch.force(30.0, 40.0))   # doctest: +SKIP
     """
-    # kept solutions are found by K_ff's CSR entries; a lone factorisation of clamps that hold
-    # whole nodes takes the assembled blocks as they are
-    nodes = free_nodes(bc) if keep is None else None
+    # clamps that hold whole nodes restrict the assembled blocks, which PARDISO takes as they are
+    nodes = free_nodes(bc)
     K = free_block(system.K, bc.free) if nodes is None else free_block(system.K_blocks, nodes)
 
     def make() -> linsolve.Factor:
         return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free], precision)
 
-    return FactorizedSystem(system, bc, K, make() if keep is None else KeptSolutions(K, make, keep))
+    if keep is None:
+        return FactorizedSystem(system, bc, K, make())
+    entries = K.tocsr()  # kept solutions are found by K_ff's CSR entries (the same as restricting K)
+    return FactorizedSystem(system, bc, entries, KeptSolutions(entries, make, keep))
 
 
 def solve_static(fs: FactorizedSystem, f: np.ndarray) -> np.ndarray:
