@@ -66,8 +66,8 @@ class StiffnessFamily:
     femur: FemurModel
     patterns: np.ndarray
     drill_point: sp.csr_matrix
-    K_c: sp.csr_matrix
-    K_s: sp.csr_matrix
+    K_c: sp.bsr_matrix
+    K_s: sp.bsr_matrix
     _outer: np.ndarray = field(repr=False)
     _sets: dict[tuple[int, int], fe.Constraints] = field(default_factory=dict, repr=False)
     _lengths: dict[float, tuple[tuple[int, int], fe.Constraints]] = field(default_factory=dict, repr=False)
@@ -80,8 +80,8 @@ class StiffnessFamily:
         doubled = BoneMaterials(mats.cortical, replace(mats.cancellous, E_MPa=2 * mats.cancellous.E_MPa),
                                 mats.cortical_model)
         other = fe.assemble(model.femur.mesh, doubled, order=model.system.order, long_axis=model.femur.frame.up)
-        K_s = (other.K - model.system.K).tocsr()
-        K_c = (model.system.K - K_s).tocsr()
+        K_s = other.K_blocks - model.system.K_blocks  # 3×3 node blocks, as assembled and factorised
+        K_c = model.system.K_blocks - K_s
         return cls(model.system, model.femur, np.asarray(model.patch.patterns), sp.csr_matrix(model.patch.mean),
                    K_c, K_s, outer_faces(model.femur.mesh, model.femur.frame))
 
@@ -98,8 +98,8 @@ class StiffnessFamily:
 
     def factorize(self, p: StiffnessPoint, solver: str = "auto") -> fe.FactorizedSystem:
         _, bc = self.constraints(p.clamp_length_mm)
-        K = (p.cortical * self.K_c + p.cancellous * self.K_s).tocsr()
-        return fe.factorize(replace(self.system, K=K), bc, solver)
+        K = p.cortical * self.K_c + p.cancellous * self.K_s
+        return fe.factorize(replace(self.system, K_blocks=K), bc, solver)
 
     def solve(self, p: StiffnessPoint, solver: str = "auto") -> np.ndarray:
         """(n_dofs, 2) unit responses at ``p`` by a factorisation."""
