@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, partial
 from pathlib import Path
 
 import numpy as np
@@ -141,13 +141,16 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
     nodes = free_nodes(bc)
     K = free_block(system.K, bc.free) if nodes is None else free_block(system.K_blocks, nodes)
 
-    def make() -> linsolve.Factor:
-        return linsolve.factorize(K, solver, linsolve.rigid_body_modes(system.nodes)[bc.free], precision)
+    def make(A) -> linsolve.Factor:
+        return linsolve.factorize(A, solver, linsolve.rigid_body_modes(system.nodes)[bc.free], precision)
 
     if keep is None:
-        return FactorizedSystem(system, bc, K, make())
-    entries = K.tocsr()  # kept solutions are found by K_ff's CSR entries (the same as restricting K)
-    return FactorizedSystem(system, bc, entries, KeptSolutions(entries, make, keep))
+        return FactorizedSystem(system, bc, K, make(K))
+    # kept solutions are found by K_ff's CSR entries (the same as restricting the CSR K); the
+    # blocks are not kept beside them (a factorisation, when one is needed, converts back)
+    entries = K.tocsr()
+    del K
+    return FactorizedSystem(system, bc, entries, KeptSolutions(entries, partial(make, entries), keep))
 
 
 def solve_static(fs: FactorizedSystem, f: np.ndarray) -> np.ndarray:
