@@ -269,14 +269,15 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
     # FEED: the lead and the load modulation (on the recording's clock, before the frame exists)
     lead = np.zeros(n_t)
     m = np.zeros((n_ch, n_t))
-    provisional, _ = _frame(problem, shift, stop_tau, lead)
-    for name in lay.blocks:
-        if roles[name] is Role.FEED:
-            term = MECHANISMS[name].term(problem, provisional, spec.variant(name), values[name])
-            terms[name] = term
-            lead += term.lead
-            m += term.value
-    frame, k_stop = _frame(problem, shift, stop_tau, lead)
+    frame, k_stop = _frame(problem, shift, stop_tau, lead)   # provisional while a feed leads the drill
+    feeds = [name for name in lay.blocks if roles[name] is Role.FEED]
+    for name in feeds:
+        term = MECHANISMS[name].term(problem, frame, spec.variant(name), values[name])
+        terms[name] = term
+        lead += term.lead
+        m += term.value
+    if feeds:
+        frame, k_stop = _frame(problem, shift, stop_tau, lead)
     on = frame.cutting.astype(float)
     m = m * on
 
