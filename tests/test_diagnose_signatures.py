@@ -191,7 +191,7 @@ def test_a_new_mechanism_is_one_registered_object(clogging_pair):
             value = np.zeros((len(problem.channels), frame.t.size))
             jac = np.zeros(value.shape + (1,))
             value[0], jac[0, :, 0] = theta[0] * load, load
-            return Term(value, jac)
+            return Term(value, lambda: (jac, None))
 
         def size(self, problem, fit):
             return abs(fit.value("thrust_gain.gain"))

@@ -269,14 +269,15 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
     # FEED: the lead and the load modulation (on the recording's clock, before the frame exists)
     lead = np.zeros(n_t)
     m = np.zeros((n_ch, n_t))
-    provisional, _ = _frame(problem, shift, stop_tau, lead)
-    for name in lay.blocks:
-        if roles[name] is Role.FEED:
-            term = MECHANISMS[name].term(problem, provisional, spec.variant(name), values[name])
-            terms[name] = term
-            lead += term.lead
-            m += term.value
-    frame, k_stop = _frame(problem, shift, stop_tau, lead)
+    frame, k_stop = _frame(problem, shift, stop_tau, lead)   # provisional while a feed leads the drill
+    feeds = [name for name in lay.blocks if roles[name] is Role.FEED]
+    for name in feeds:
+        term = MECHANISMS[name].term(problem, frame, spec.variant(name), values[name])
+        terms[name] = term
+        lead += term.lead
+        m += term.value
+    if feeds:
+        frame, k_stop = _frame(problem, shift, stop_tau, lead)
     on = frame.cutting.astype(float)
     m = m * on
 
@@ -332,33 +333,30 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
         dS = (_loads(problem, frame.tau + h, stop_tau) - _loads(problem, frame.tau - h, stop_tau)) / (2 * h)
         dR = _rise_slope(dS, held, rising) if rise else np.zeros_like(S)
         dC = np.zeros_like(S)
-        for name, block in lay.blocks.items():
+        for name in lay.blocks:
             if roles[name] is Role.LOAD:
                 dC += np.gradient(terms[name].value, frame.tau, axis=1) if np.ptp(frame.tau) > 0 else 0.0
-                J[:, :, block] += terms[name].jacobian   # multiplied by g·P·H_φ below
-            elif roles[name] is Role.SENSOR:
-                J[:, :, block] += terms[name].jacobian
         dHU = H * (dS - dR) + H_phi * (dR + dC)
+        # each mechanism's block written once (the blocks are disjoint), each term's derivatives
+        # multiplied by what multiplies the term in the model
         for name, block in lay.blocks.items():
             if roles[name] is Role.LOAD:
-                J[:, :, block] *= (gP * H_phi)[:, :, None]
+                J[:, :, block] = terms[name].jacobian * (gP * H_phi)[:, :, None]
+            elif roles[name] is Role.SENSOR:
+                J[:, :, block] = terms[name].jacobian
             elif roles[name] is Role.GAIN:
-                J[:, :, block] -= (gP * (S - R + phi * (R + C)))[:, :, None] * terms[name].jacobian
+                J[:, :, block] = -((gP * (S - R + phi * (R + C)))[:, :, None] * terms[name].jacobian)
+            elif roles[name] is Role.FEED:
+                # through the modulation and through the lead (τ' moves with δ); the lead is frozen
+                # and the modulation ends once the feed stops
+                lead_jac = terms[name].lead_jacobian
+                if k_stop is not None:
+                    lead_jac = lead_jac.copy()
+                    lead_jac[t > frame.stop_t_s] = lead_jac[max(k_stop - 1, 0)]
+                m_jac = terms[name].jacobian * on[None, :, None]
+                J[:, :, block] = (g[:, None] * HU)[:, :, None] * m_jac + (gP * dHU)[:, :, None] * lead_jac[None, :, :]
         if GAIN_SPARES in lay.names:
             J[:, :, lay.index(GAIN_SPARES)] = gP * s_gain * (R + C)
-        # FEED: through the modulation and through the lead (τ' moves with δ); the lead is frozen
-        # and the modulation ends once the feed stops
-        for name, block in lay.blocks.items():
-            if roles[name] is Role.FEED:
-                width = block.stop - block.start
-                lead_jac = np.zeros((n_t, width))
-                lead_jac += terms[name].lead_jacobian
-                m_jac = np.zeros((n_ch, n_t, width))
-                m_jac += terms[name].jacobian
-                if k_stop is not None:
-                    lead_jac[t > frame.stop_t_s] = lead_jac[max(k_stop - 1, 0)]
-                m_jac = m_jac * on[None, :, None]
-                J[:, :, block] += (g[:, None] * HU)[:, :, None] * m_jac + (gP * dHU)[:, :, None] * lead_jac[None, :, :]
         J[:, :, 0] = -gP * dHU
         if model_sim:
             hs = 0.02

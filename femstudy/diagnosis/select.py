@@ -122,13 +122,14 @@ def select(problem: Problem, fits: dict) -> Selection:
     checks: dict[str, tuple[Check, ...]] = {}
     subset = best
     while subset:
+        current = fits[subset]
+        polished: dict[str, Fit] = {}
         for m in in_order(subset):   # each smaller fit also from the larger optimum
             smaller = subset - {m}
-            polished = fit(problem, fits[subset].spec.without(m), fits[subset].params())
-            if polished.chi2_total < fits[smaller].chi2_total:
-                fits[smaller] = polished
-                bic[smaller] = information(problem, polished, inflation)
-        current = fits[subset]
+            polished[m] = fit(problem, current.spec.without(m), current.params())
+            if polished[m].chi2_total < fits[smaller].chi2_total:
+                fits[smaller] = polished[m]
+                bic[smaller] = information(problem, polished[m], inflation)
         reasons: dict[str, tuple[float, str]] = {}
         failures: dict[str, tuple[Check, ...]] = {}
         for m in in_order(subset):
@@ -140,7 +141,7 @@ def select(problem: Problem, fits: dict) -> Selection:
             elif size < mech.floor:
                 reasons[m] = (delta, f"size {size:.3g} below {mech.floor:g}")
             else:
-                found = tuple(mech.checks(problem, current, refitter(problem, m)))
+                found = tuple(mech.checks(problem, current, refitter(problem, m, {id(current): polished[m]})))
                 checks[m] = found
                 failed = [c for c in found if not c.passed]
                 if failed:

@@ -55,10 +55,12 @@ def _chi2(problem, f_model: np.ndarray, rows: np.ndarray) -> float:
                      for c in range(len(problem.channels))))
 
 
-def refitter(problem, mechanism: str):
-    """``refit(kind, fit)`` for ``mechanism``'s checks (see the module docstring)."""
+def refitter(problem, mechanism: str, without_fits: dict | None = None):
+    """``refit(kind, fit)`` for ``mechanism``'s checks (see the module docstring).
+    ``without_fits``: fits of ``f.spec.without(mechanism)`` from ``f.params()`` already made, by
+    ``id(f)`` (the selection's drop-one refits are those)."""
     n = math.log(max(problem.n, 3))
-    cache: dict = {}
+    cache: dict = dict(without_fits or {})
 
     def without(f: Fit) -> Fit:
         if id(f) not in cache:

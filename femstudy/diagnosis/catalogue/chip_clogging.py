@@ -154,15 +154,19 @@ class ChipClogging:
         thrust = X @ theta[:k]
         n_ch = len(problem.channels)
         value = np.zeros((n_ch, thrust.size))
-        jac = np.zeros((n_ch, thrust.size, theta.size))
         value[0] = thrust
-        jac[0, :, :k] = X
         if problem.has_torque:
-            ratio = theta[k]
-            value[1] = ratio * thrust
-            jac[1, :, :k] = ratio * X
-            jac[1, :, k] = thrust
-        return Term(value, jac)
+            value[1] = theta[k] * thrust
+
+        def derivatives() -> tuple[np.ndarray, None]:
+            jac = np.zeros((n_ch, thrust.size, theta.size))
+            jac[0, :, :k] = X
+            if problem.has_torque:
+                jac[1, :, :k] = theta[k] * X
+                jac[1, :, k] = thrust
+            return jac, None
+
+        return Term(value, derivatives)
 
     def after(self, problem, fit) -> float:
         """The excess just after breakthrough, ΔF/F_o (every w_j is 1 there)."""

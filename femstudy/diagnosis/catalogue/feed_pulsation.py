@@ -230,33 +230,38 @@ class FeedPulsation:
         w = np.column_stack([f(k * phi) for k in harmonics for f in (np.sin, np.cos)])
         k = 2 * h
         m = w @ theta[:k]
-        # ∂m/∂φ, and φ's derivatives in the frequency and the sweep
-        dm = np.column_stack([k_ * w[:, 2 * i + 1] * theta[2 * i] - k_ * w[:, 2 * i] * theta[2 * i + 1]
-                              for i, k_ in enumerate(harmonics)]).sum(axis=1)   # w holds sin kφ, cos kφ
-        half = problem.cut_s / 2
-        u = t - (problem.contact_t + half)
-        extra = [dm * (2 * math.pi * u + math.pi * sweep * u ** 2 / half)]
-        if variant.get("sweep", 0.0):
-            extra.append(dm * math.pi * frequency * u ** 2 / half)
-        columns = np.column_stack([w] + [e[:, None] for e in extra])
-        lead_columns = _integral(t, columns, frame.contact_t_s)
-        first = k + (1 if problem.has_torque else 0)
-        index = list(range(k)) + list(range(first, first + len(extra)))
         n_ch = len(problem.channels)
         value = np.zeros((n_ch, t.size))
-        jac = np.zeros((n_ch, t.size, theta.size))
         value[0] = m
-        jac[0][:, index] = columns
         if problem.has_torque:
-            kappa = theta[k]
-            value[1] = kappa * m
-            jac[1][:, index] = kappa * columns
-            jac[1, :, k] = m
-        lead_jac = np.zeros((t.size, theta.size))
-        if variant.get("without_lead"):
-            return Term(value, jac, np.zeros(t.size), lead_jac)
-        lead_jac[:, index] = lead_columns
-        return Term(value, jac, lead_columns[:, :k] @ theta[:k], lead_jac)
+            value[1] = theta[k] * m
+        without_lead = bool(variant.get("without_lead"))
+        lead_w = None if without_lead else _integral(t, w, frame.contact_t_s)
+
+        def derivatives() -> tuple[np.ndarray, np.ndarray]:
+            # ∂m/∂φ, and φ's derivatives in the frequency and the sweep
+            dm = np.column_stack([k_ * w[:, 2 * i + 1] * theta[2 * i] - k_ * w[:, 2 * i] * theta[2 * i + 1]
+                                  for i, k_ in enumerate(harmonics)]).sum(axis=1)   # w holds sin kφ, cos kφ
+            half = problem.cut_s / 2
+            u = t - (problem.contact_t + half)
+            extra = [dm * (2 * math.pi * u + math.pi * sweep * u ** 2 / half)]
+            if variant.get("sweep", 0.0):
+                extra.append(dm * math.pi * frequency * u ** 2 / half)
+            columns = np.column_stack([w] + [e[:, None] for e in extra])
+            first = k + (1 if problem.has_torque else 0)
+            index = list(range(k)) + list(range(first, first + len(extra)))
+            jac = np.zeros((n_ch, t.size, theta.size))
+            jac[0][:, index] = columns
+            if problem.has_torque:
+                jac[1][:, index] = theta[k] * columns
+                jac[1, :, k] = m
+            lead_jac = np.zeros((t.size, theta.size))
+            if not without_lead:   # the columns' integrals, each on its own: those of w are lead_w's
+                lead_jac[:, index] = np.column_stack([lead_w, _integral(t, columns[:, k:], frame.contact_t_s)])
+            return jac, lead_jac
+
+        lead = np.zeros(t.size) if without_lead else lead_w @ theta[:k]
+        return Term(value, derivatives, lead)
 
     def frequency(self, problem, fit) -> tuple[float, float, int]:
         """The fitted frequency [Hz], sweep and number of harmonics."""

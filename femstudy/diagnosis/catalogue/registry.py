@@ -11,7 +11,9 @@ diagnosis.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -45,12 +47,27 @@ class Layout:
 @dataclass(frozen=True)
 class Term:
     """A mechanism's contribution on the model grid at given parameters, channels × instants, and
-    its derivatives (channels × instants × parameters); ``lead``/``lead_jacobian`` only for FEED."""
+    its derivatives (channels × instants × parameters); ``lead``/``lead_jacobian`` only for FEED.
+
+    ``derivatives`` returns the jacobian and the lead's (None but for FEED); they are computed when
+    first read: a fit reads them only at the parameters it accepts, not at a trial step it rejects
+    (a third of its evaluations)."""
 
     value: np.ndarray
-    jacobian: np.ndarray
+    derivatives: Callable[[], tuple[np.ndarray, np.ndarray | None]] = field(repr=False, compare=False)
     lead: np.ndarray | None = None
-    lead_jacobian: np.ndarray | None = None
+
+    @functools.cached_property
+    def _derived(self) -> tuple[np.ndarray, np.ndarray | None]:
+        return self.derivatives()
+
+    @property
+    def jacobian(self) -> np.ndarray:
+        return self._derived[0]
+
+    @property
+    def lead_jacobian(self) -> np.ndarray | None:
+        return self._derived[1]
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,22 @@ AIR_SHARE = 0.9
 MIN_AIR_S = 0.8
 
 
+_BASES: dict = {}
+
+
+def _basis(t: np.ndarray, lower: float, upper: float, degree: int) -> np.ndarray:
+    """:func:`.legendre_basis` of the model grid, computed once per grid, window and degree (a fit
+    evaluates the drift on the same grid some ten times; the grid is held with its basis, so its
+    ``id`` is not reused while it is cached)."""
+    key = (id(t), lower, upper, degree)
+    hit = _BASES.get(key)
+    if hit is None or hit[0] is not t:
+        if len(_BASES) >= 16:
+            _BASES.clear()
+        hit = _BASES[key] = (t, legendre_basis(t, lower, upper, degree))
+    return hit[1]
+
+
 def window(problem) -> tuple[float, float]:
     t = problem.band.t_dec
     return float(t[0]), float(t[-1])
@@ -63,15 +79,19 @@ class SensorDrift:
     def term(self, problem, frame, variant, theta) -> Term:
         d = variant.get("degree", 1)
         lo, hi = window(problem)
-        X = legendre_basis(frame.t, lo, hi, d)
+        X = _basis(frame.t, lo, hi, d)
         n_ch = len(problem.channels)
         value = np.zeros((n_ch, frame.t.size))
-        jac = np.zeros((n_ch, frame.t.size, theta.size))
         for c in range(n_ch):
-            block = slice(c * d, (c + 1) * d)
-            value[c] = X @ theta[block]
-            jac[c, :, block] = X
-        return Term(value, jac)
+            value[c] = X @ theta[c * d:(c + 1) * d]
+
+        def derivatives() -> tuple[np.ndarray, None]:
+            jac = np.zeros((n_ch, frame.t.size, theta.size))
+            for c in range(n_ch):
+                jac[c, :, c * d:(c + 1) * d] = X
+            return jac, None
+
+        return Term(value, derivatives)
 
     def curves(self, problem, fit, t: np.ndarray) -> np.ndarray:
         d = fit.spec.variant(NAME).get("degree", 1)

@@ -75,12 +75,18 @@ class ThermalSoftening:
         s = X @ theta[:k]
         n_ch = len(problem.channels)
         value = np.zeros((n_ch, s.size))
-        jac = np.zeros((n_ch, s.size, theta.size))
-        value[0], jac[0, :, :k] = s, X
+        value[0] = s
         if problem.has_torque:
-            kappa = theta[k]
-            value[1], jac[1, :, :k], jac[1, :, k] = kappa * s, kappa * X, s
-        return Term(value, jac)
+            value[1] = theta[k] * s
+
+        def derivatives() -> tuple[np.ndarray, None]:
+            jac = np.zeros((n_ch, s.size, theta.size))
+            jac[0, :, :k] = X
+            if problem.has_torque:
+                jac[1, :, :k], jac[1, :, k] = theta[k] * X, s
+            return jac, None
+
+        return Term(value, derivatives)
 
     def loss(self, problem, fit, elapsed_s: np.ndarray) -> np.ndarray:
         n = self.intervals(fit.spec.variant(NAME))
