@@ -42,7 +42,8 @@ import math
 
 import numpy as np
 
-from femstudy.diagnosis.catalogue.registry import Check, Layout, Parameter, Reading, Role, Term, Variant, register
+from femstudy.diagnosis.catalogue.registry import (Check, Layout, Parameter, Reading, Role, Term, Variant,
+                                                  proportional_term, register)
 from femstudy.diagnosis.flexible import monotone_basis
 from femstudy.drilling.clogging import friction_factor
 
@@ -149,24 +150,7 @@ class ChipClogging:
         return np.hstack(columns)
 
     def term(self, problem, frame, variant, theta) -> Term:
-        X = self._columns(problem, frame, self.intervals(variant))
-        k = X.shape[1]
-        thrust = X @ theta[:k]
-        n_ch = len(problem.channels)
-        value = np.zeros((n_ch, thrust.size))
-        value[0] = thrust
-        if problem.has_torque:
-            value[1] = theta[k] * thrust
-
-        def derivatives() -> tuple[np.ndarray, None]:
-            jac = np.zeros((n_ch, thrust.size, theta.size))
-            jac[0, :, :k] = X
-            if problem.has_torque:
-                jac[1, :, :k] = theta[k] * X
-                jac[1, :, k] = thrust
-            return jac, None
-
-        return Term(value, derivatives)
+        return proportional_term(problem, self._columns(problem, frame, self.intervals(variant)), theta)
 
     def after(self, problem, fit) -> float:
         """The excess just after breakthrough, ΔF/F_o (every w_j is 1 there)."""

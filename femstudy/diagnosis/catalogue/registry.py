@@ -70,6 +70,28 @@ class Term:
         return self._derived[1]
 
 
+def proportional_term(problem, X: np.ndarray, theta: np.ndarray) -> Term:
+    """The term of a thrust shape s = X θ[:k] (X instants × k) that the torque carries in the ratio
+    κ = θ[k] (when the recording has torque): value [s, κ s], derivatives ∂/∂θ[:k] = [X, κ X] and
+    ∂/∂κ = [0, s]. Clogging and softening are such terms."""
+    k = X.shape[1]
+    s = X @ theta[:k]
+    n_ch = len(problem.channels)
+    value = np.zeros((n_ch, s.size))
+    value[0] = s
+    if problem.has_torque:
+        value[1] = theta[k] * s
+
+    def derivatives() -> tuple[np.ndarray, None]:
+        jac = np.zeros((n_ch, s.size, theta.size))
+        jac[0, :, :k] = X
+        if problem.has_torque:
+            jac[1, :, :k], jac[1, :, k] = theta[k] * X, s
+        return jac, None
+
+    return Term(value, derivatives)
+
+
 @dataclass(frozen=True)
 class Variant:
     """Discrete settings of a mechanism that are not fitted by least squares (a frequency found by a

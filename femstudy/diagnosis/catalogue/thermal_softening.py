@@ -29,7 +29,8 @@ import math
 import numpy as np
 from scipy import optimize
 
-from femstudy.diagnosis.catalogue.registry import Check, Layout, Parameter, Reading, Role, Term, Variant, register
+from femstudy.diagnosis.catalogue.registry import (Check, Layout, Parameter, Reading, Role, Term, Variant,
+                                                  proportional_term, register)
 from femstudy.diagnosis.flexible import monotone_basis
 
 NAME = "thermal_softening"
@@ -70,23 +71,8 @@ class ThermalSoftening:
         return monotone_basis(t - contact_t, 0.0, problem.cut_s, intervals)
 
     def term(self, problem, frame, variant, theta) -> Term:
-        X = self.basis(problem, frame.t, frame.contact_t_s, self.intervals(variant))
-        k = X.shape[1]
-        s = X @ theta[:k]
-        n_ch = len(problem.channels)
-        value = np.zeros((n_ch, s.size))
-        value[0] = s
-        if problem.has_torque:
-            value[1] = theta[k] * s
-
-        def derivatives() -> tuple[np.ndarray, None]:
-            jac = np.zeros((n_ch, s.size, theta.size))
-            jac[0, :, :k] = X
-            if problem.has_torque:
-                jac[1, :, :k], jac[1, :, k] = theta[k] * X, s
-            return jac, None
-
-        return Term(value, derivatives)
+        return proportional_term(problem, self.basis(problem, frame.t, frame.contact_t_s, self.intervals(variant)),
+                                 theta)
 
     def loss(self, problem, fit, elapsed_s: np.ndarray) -> np.ndarray:
         n = self.intervals(fit.spec.variant(NAME))
