@@ -13,6 +13,7 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from femstudy.errors import UserError
 from femstudy.fe import assemble, factorize, fix_facets, solve_static
+from femstudy.fe.assembly import small_pages
 from femstudy.fe.constraints import Constraints
 from femstudy.fe.static import free_block, free_nodes
 from femstudy.fe.linsolve import rigid_body_modes
@@ -159,3 +160,17 @@ def test_clamps_holding_part_of_a_node_restrict_entries_and_both_paths_solve_ali
         u = solve_static(fs, f)
         assert np.abs(u[bc.free] - reference).max() < 1e-10 * np.abs(reference).max()
         assert np.all(u[bc.fixed] == 0)
+
+def test_assembly_stops_advising_huge_pages_only_while_it_runs(monkeypatch):
+    monkeypatch.delenv("NUMPY_MADVISE_HUGEPAGE", raising=False)
+    advise = np._core.multiarray._set_madvise_hugepage
+    before = advise(True)
+    try:
+        with small_pages():
+            assert advise(False) is False      # off inside the block
+        assert advise(True) is True            # restored after it
+        monkeypatch.setenv("NUMPY_MADVISE_HUGEPAGE", "1")   # the user's choice is left alone
+        with small_pages():
+            assert advise(True) is True
+    finally:
+        advise(before)

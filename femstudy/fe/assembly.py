@@ -14,7 +14,9 @@ M are assembled as 3×3-block sparse matrices over the nodes' sparsity pattern.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -216,6 +218,24 @@ def _blocks(blocks: np.ndarray, indptr, indices, n_nodes: int) -> sp.bsr_matrix:
     return matrix
 
 
+@contextlib.contextmanager
+def small_pages():
+    """Within the block, numpy does not advise huge pages for its large arrays (unless the user
+    chose with ``NUMPY_MADVISE_HUGEPAGE``). Where the kernel compacts memory on demand for
+    advised regions (transparent huge pages with defrag "madvise", as on the benchmark
+    machine), first touching the assembly's arrays took 0.4-1.1 s on the 16 mm femur, varying
+    from process to process, against a steady 0.6 s without the advice (bench/RESULTS.md)."""
+    advise = getattr(np._core.multiarray, "_set_madvise_hugepage", None)
+    if advise is None or "NUMPY_MADVISE_HUGEPAGE" in os.environ:
+        yield
+        return
+    before = advise(False)
+    try:
+        yield
+    finally:
+        advise(before)
+
+
 def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int = 2,
              long_axis=None) -> FESystem:
     """Assemble the stiffness K [N/mm] and consistent mass M [tonne] of a region-marked mesh.
@@ -243,7 +263,11 @@ def assemble(mesh: TetMesh, materials: BoneMaterials | None = None, order: int =
     >>> system.n_dofs
     792
     """
-    materials = BoneMaterials() if materials is None else materials
+    with small_pages():
+        return _assemble(mesh, BoneMaterials() if materials is None else materials, order, long_axis)
+
+
+def _assemble(mesh: TetMesh, materials: BoneMaterials, order: int, long_axis) -> FESystem:
     t0 = time.perf_counter()
     points, tets = np.asarray(mesh.points, float), np.asarray(mesh.tets)
     require(points.ndim == 2 and points.shape[1] == 3 and tets.ndim == 2 and tets.shape[1] == 4 and len(tets),
