@@ -53,7 +53,7 @@ def phases(model_path: str, out_path: str) -> None:
     bc = fe.clamp(system, model.clamps)
     mark("clamps")
     nodes = static.free_nodes(bc)
-    K = static.free_block(system.K, bc.free) if nodes is None else static.free_block(system.K_blocks, nodes)
+    K = static.free_block(system.K, bc.free) if nodes is None else linsolve.Restriction(system.K_blocks, nodes)
     mark("K_ff")
     factor = linsolve.factorize(K, "pardiso", precision="single")
     t = factor.timings

@@ -16,7 +16,7 @@ from femstudy.fe import assemble, factorize, fix_facets, solve_static
 from femstudy.fe.assembly import small_pages
 from femstudy.fe.constraints import Constraints
 from femstudy.fe.static import free_block, free_nodes
-from femstudy.fe.linsolve import rigid_body_modes
+from femstudy.fe.linsolve import Restriction, rigid_body_modes
 from femstudy.fe.materials import CORTICAL_TRANSVERSELY_ISOTROPIC, TransverselyIsotropic, isotropic_stiffness
 from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL, TetMesh
 from femstudy.materials import BoneMaterials
@@ -154,7 +154,7 @@ def test_clamps_holding_part_of_a_node_restrict_entries_and_both_paths_solve_ali
     f[2::3] = 1.0
     for bc, form in ((whole, "bsr"), (partial, "csr")):
         fs = factorize(system, bc, precision="single")
-        assert fs.stiffness.format == form
+        assert fs.stiffness.format == form and isinstance(fs.factor.A, Restriction) == (form == "bsr")
         assert abs(fs.K - free_block(system.K, bc.free)).max() == 0
         reference = spsolve(system.K[bc.free][:, bc.free].tocsc(), f[bc.free])
         u = solve_static(fs, f)
@@ -174,3 +174,16 @@ def test_assembly_stops_advising_huge_pages_only_while_it_runs(monkeypatch):
             assert advise(True) is True
     finally:
         advise(before)
+
+
+def test_a_restriction_multiplies_and_gives_upper_blocks_as_the_formed_k_ff():
+    system = assemble(two_region_bar())
+    bc = fix_facets(system, system.mesh.boundary_facets()[:3])
+    restriction = Restriction(system.K_blocks, free_nodes(bc))
+    K_ff = free_block(system.K, bc.free)
+    assert restriction.shape == K_ff.shape and abs(restriction.matrix() - K_ff).max() == 0
+    x = np.random.default_rng(0).standard_normal((K_ff.shape[0], 2))
+    assert np.abs(restriction @ x - K_ff @ x).max() <= 1e-12 * np.abs(K_ff @ x).max()
+    block = np.arange(K_ff.shape[0]) // 3
+    expected = np.where(block[None, :] >= block[:, None], K_ff.toarray(), 0.0).astype(np.float32)
+    assert np.array_equal(restriction.upper(np.float32).toarray(), expected)

@@ -19,6 +19,9 @@ from femstudy.fe import linsolve
 from femstudy.fe.assembly import FESystem
 from femstudy.fe.constraints import Constraints
 from femstudy.fe.kept import KeptSolutions
+from femstudy.fe.linsolve import free_block
+
+__all__ = ["FactorizedSystem", "factorize", "free_block", "free_nodes", "solve_static"]
 
 log = logging.getLogger(__name__)
 
@@ -29,18 +32,27 @@ class FactorizedSystem:
 
     system    : the assembled :class:`~femstudy.fe.assembly.FESystem`
     bc        : the clamps (:class:`~femstudy.fe.constraints.Constraints`)
-    stiffness : K_ff [N/mm] as it was factorised: BSR of 3×3 node blocks when the clamps hold
-                whole nodes, else CSR
+    factor    : the solver of K_ff (:class:`femstudy.fe.linsolve.Factor`)
+    formed    : K_ff's entries when they were formed to be factorised or to be found among kept
+                solutions; else (a static solve with clamps holding whole nodes factorises a
+                :class:`~femstudy.fe.linsolve.Restriction`) they are formed when first asked for
+    stiffness : K_ff [N/mm]: BSR of 3×3 node blocks when the clamps hold whole nodes, else CSR
     K, M      : K_ff [N/mm] and M_ff [tonne], CSR on one shared pattern, so K + c M is a sum of
                 their data arrays; each is formed when first asked for (a static solve needs
                 neither)
-    factor    : the solver of K_ff (:class:`femstudy.fe.linsolve.Factor`)
     """
 
     system: FESystem
     bc: Constraints
-    stiffness: sp.csr_matrix | sp.bsr_matrix
     factor: linsolve.Factor
+    formed: sp.csr_matrix | sp.bsr_matrix | None = None
+
+    @cached_property
+    def stiffness(self) -> sp.csr_matrix | sp.bsr_matrix:
+        if self.formed is not None:
+            return self.formed
+        nodes = free_nodes(self.bc)
+        return free_block(self.system.K, self.bc.free) if nodes is None else free_block(self.system.K_blocks, nodes)
 
     @cached_property
     def K(self) -> sp.csr_matrix:
@@ -75,26 +87,6 @@ class FactorizedSystem:
     def near_null_space(self) -> np.ndarray:
         """Rigid-body modes restricted to the free DOFs (for AMG)."""
         return linsolve.rigid_body_modes(self.system.nodes)[self.bc.free]
-
-
-def free_block(A: sp.csr_matrix | sp.bsr_matrix, free: np.ndarray) -> sp.csr_matrix | sp.bsr_matrix:
-    """A[free][:, free] of a CSR matrix with sorted indices, in one pass over its entries (the
-    rows and columns keep their order, so the result's indices stay sorted and K_ff and M_ff,
-    restricted from one pattern, share theirs). Of a BSR matrix, ``free`` numbers block rows
-    (nodes) and whole blocks are kept: a ninth of the index work, and no conversion."""
-    size = A.blocksize[0] if A.format == "bsr" else 1
-    n = A.shape[0] // size
-    number = np.full(n, -1, dtype=A.indices.dtype)
-    number[free] = np.arange(len(free), dtype=A.indices.dtype)
-    rows = np.repeat(number, np.diff(A.indptr))
-    keep = (rows >= 0) & (number[A.indices] >= 0)
-    del rows
-    kept = np.concatenate([[0], np.cumsum(keep, dtype=np.int64)])
-    indptr = np.concatenate([[0], np.cumsum(kept[A.indptr[free + 1]] - kept[A.indptr[free]])])
-    shape = (size * len(free), size * len(free))
-    restricted = type(A)((A.data[keep], number[A.indices[keep]], indptr), shape=shape)
-    restricted.has_sorted_indices = A.has_sorted_indices
-    return restricted
 
 
 def free_nodes(bc: Constraints) -> np.ndarray | None:
@@ -137,20 +129,21 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
     >>> fs = factorize(system, bc)                      # doctest: +SKIP
     >>> u = solve_static(fs, patch.force(30.0, 40.0))   # doctest: +SKIP
     """
-    # clamps that hold whole nodes restrict the assembled blocks, which PARDISO takes as they are
+    # clamps that hold whole nodes: PARDISO takes the assembled blocks restricted as they are
     nodes = free_nodes(bc)
-    K = free_block(system.K, bc.free) if nodes is None else free_block(system.K_blocks, nodes)
 
     def make(A) -> linsolve.Factor:
         return linsolve.factorize(A, solver, linsolve.rigid_body_modes(system.nodes)[bc.free], precision)
 
     if keep is None:
-        return FactorizedSystem(system, bc, K, make(K))
+        if nodes is not None:
+            return FactorizedSystem(system, bc, make(linsolve.Restriction(system.K_blocks, nodes)))
+        K = free_block(system.K, bc.free)
+        return FactorizedSystem(system, bc, make(K), K)
     # kept solutions are found by K_ff's CSR entries (the same as restricting the CSR K); the
     # blocks are not kept beside them (a factorisation, when one is needed, converts back)
-    entries = K.tocsr()
-    del K
-    return FactorizedSystem(system, bc, entries, KeptSolutions(entries, partial(make, entries), keep))
+    entries = free_block(system.K, bc.free) if nodes is None else free_block(system.K_blocks, nodes).tocsr()
+    return FactorizedSystem(system, bc, KeptSolutions(entries, partial(make, entries), keep), entries)
 
 
 def solve_static(fs: FactorizedSystem, f: np.ndarray) -> np.ndarray:
