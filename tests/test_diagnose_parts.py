@@ -214,3 +214,30 @@ def test_model_derivatives_match_finite_differences_in_every_coefficient():
         assert np.max(np.abs(J[:, :, k] - fd)) <= 1e-6 * max(np.max(np.abs(fd)), 1.0), name
         checked += 1
     assert checked == len(lay.names) - len(clock)
+
+
+def test_a_rescaling_that_cannot_reach_noise_is_not_searched_and_changes_nothing(monkeypatch):
+    """A 5 % low simulation and a thrust step of +30 % halfway through the cut (outside the
+    catalogue): even the fullest fit with the scales stays far above noise, so the rescaled family
+    is not searched; searching it anyway (no reach limit) gives the same diagnosis."""
+    import importlib
+    from dataclasses import replace
+
+    from femstudy.diagnosis import diagnose
+
+    diagnose_module = importlib.import_module("femstudy.diagnosis.diagnose")  # the package's name is the function
+
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), SpindleRipple(0.05), None, None, None), seed=4)
+    sim = TraceSimulation.from_recording(
+        synthesize(1.5, 1500, u1_MPa=0.95 * 448.5, effects=Effects.none(), sample_rate_hz=500), 1500)
+    late = (rec.time_s > rec.time_s[rec.time_s.size // 2]) & (rec.thrust_N > 0.3 * rec.thrust_N.max())
+    rec = replace(rec, thrust_N=rec.thrust_N * np.where(late, 1.3, 1.0))
+    said: list[str] = []
+    skipped = diagnose(rec, sim, 6.0, progress=said.append).to_json()
+    assert any("rescaled would still leave more than noise" in s for s in said)
+    monkeypatch.setattr(diagnose_module, "RESCALED_REACH", math.inf)
+    said.clear()
+    searched = diagnose(rec, sim, 6.0, progress=said.append).to_json()
+    assert any("refitted with the simulated loads rescaled: not better" in s for s in said)
+    for key in ("missing_physics", "unexplained", "calibration", "fit"):
+        assert skipped[key] == searched[key]
