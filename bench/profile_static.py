@@ -54,7 +54,7 @@ def phases(model_path: str, out_path: str) -> None:
     mark("clamps")
     nodes = static.free_nodes(bc)
     K = static.free_block(system.K, bc.free) if nodes is None else linsolve.Restriction(system.K_blocks, nodes)
-    mark("K_ff")
+    mark("K_ff (a restriction: PARDISO's input takes its blocks)")
     factor = linsolve.factorize(K, "pardiso", precision="single")
     t = factor.timings
     mark("factorisation")

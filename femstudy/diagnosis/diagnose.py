@@ -99,7 +99,8 @@ def rescaling_may_reach_noise(scaled: Problem, fits: dict) -> bool:
 
     The probe: the fullest subset's fit refitted with the scales, from its optimum (one fit
     against a search of every subset). Its χ² (on the data's own noise level) over the
-    χ² test's bound χ²₀ at p = RESIDUAL_P decides: the family is searched only when
+    χ² test's bound χ²₀ at p = RESIDUAL_P on n degrees of freedom (the largest bound any
+    selected model's test, on n − k, can have) decides: the family is searched only when
     χ² ≤ RESCALED_REACH · χ²₀. The search can do better than the probe (other variants, a
     pulsation found in the rescaled residual): on the tuning split (seed 1, 38 searches) its
     selected model came to no less than 0.30 of the probe's χ², so a probe 4 χ²₀ over leaves a

@@ -225,7 +225,7 @@ def small_pages():
     advised regions (transparent huge pages with defrag "madvise", as on the benchmark
     machine), first touching the assembly's arrays took 0.4-1.1 s on the 16 mm femur, varying
     from process to process, against a steady 0.6 s without the advice (bench/RESULTS.md)."""
-    advise = getattr(np._core.multiarray, "_set_madvise_hugepage", None)
+    advise = getattr(getattr(getattr(np, "_core", None), "multiarray", None), "_set_madvise_hugepage", None)
     if advise is None or "NUMPY_MADVISE_HUGEPAGE" in os.environ:
         yield
         return

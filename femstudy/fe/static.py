@@ -1,8 +1,9 @@
 """The clamped model factorised once: K_ff u_f = f_f on the free DOFs (u = 0 on the clamps).
 
-:func:`factorize` restricts K and M to the free DOFs and factorises K_ff; the static solve,
-the modal analysis (shift-invert about 0 is K_ff⁻¹) and the transient's reduced basis
-(femstudy.fe.transient) all use that one factorisation.
+:func:`factorize` factorises K_ff, K restricted to the free DOFs; the static solve, the modal
+analysis (shift-invert about 0 is K_ff⁻¹) and the transient's reduced basis
+(femstudy.fe.transient) all use that one factorisation. K_ff and M_ff are formed when an
+analysis needs their entries (PARDISO takes K's blocks restricted as they are).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ class FactorizedSystem:
                 solutions; else (a static solve with clamps holding whole nodes factorises a
                 :class:`~femstudy.fe.linsolve.Restriction`) they are formed when first asked for
     stiffness : K_ff [N/mm]: BSR of 3×3 node blocks when the clamps hold whole nodes, else CSR
+                (CSR whenever kept solutions are used)
     K, M      : K_ff [N/mm] and M_ff [tonne], CSR on one shared pattern, so K + c M is a sum of
                 their data arrays; each is formed when first asked for (a static solve needs
                 neither)
@@ -137,7 +139,9 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
 
     if keep is None:
         if nodes is not None:
-            return FactorizedSystem(system, bc, make(linsolve.Restriction(system.K_blocks, nodes)))
+            restriction = linsolve.Restriction(system.K_blocks, nodes)
+            factor = make(restriction)   # the solvers other than PARDISO form K_ff: kept then
+            return FactorizedSystem(system, bc, factor, restriction.formed)
         K = free_block(system.K, bc.free)
         return FactorizedSystem(system, bc, make(K), K)
     # kept solutions are found by K_ff's CSR entries (the same as restricting the CSR K); the
