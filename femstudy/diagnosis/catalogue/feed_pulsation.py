@@ -42,7 +42,8 @@ import math
 
 import numpy as np
 
-from femstudy.diagnosis.catalogue.registry import Check, Layout, Parameter, Reading, Role, Term, Variant, register
+from femstudy.diagnosis.catalogue.registry import (Check, Layout, Parameter, Reading, Role, Term, Variant, carried,
+                                                   carried_jacobian, register)
 
 NAME = "feed_pulsation"
 #: Frequencies a feed drive's pulsation can have [Hz] (above, the analysis band attenuates).
@@ -230,11 +231,7 @@ class FeedPulsation:
         w = np.column_stack([f(k * phi) for k in harmonics for f in (np.sin, np.cos)])
         k = 2 * h
         m = w @ theta[:k]
-        n_ch = len(problem.channels)
-        value = np.zeros((n_ch, t.size))
-        value[0] = m
-        if problem.has_torque:
-            value[1] = theta[k] * m
+        value = carried(problem, m, theta[k] if problem.has_torque else 0.0)
         without_lead = bool(variant.get("without_lead"))
         lead_w = None if without_lead else _integral(t, w, frame.contact_t_s)
 
@@ -250,11 +247,7 @@ class FeedPulsation:
             columns = np.column_stack([w] + [e[:, None] for e in extra])
             first = k + (1 if problem.has_torque else 0)
             index = list(range(k)) + list(range(first, first + len(extra)))
-            jac = np.zeros((n_ch, t.size, theta.size))
-            jac[0][:, index] = columns
-            if problem.has_torque:
-                jac[1][:, index] = theta[k] * columns
-                jac[1, :, k] = m
+            jac = carried_jacobian(problem, columns, index, m, theta, k)
             lead_jac = np.zeros((t.size, theta.size))
             if not without_lead:   # the columns' integrals, each on its own: those of w are lead_w's
                 lead_jac[:, index] = np.column_stack([lead_w, _integral(t, columns[:, k:], frame.contact_t_s)])

@@ -70,26 +70,35 @@ class Term:
         return self._derived[1]
 
 
+def carried(problem, s: np.ndarray, kappa: float) -> np.ndarray:
+    """A thrust shape s (instants) and, when the recording has torque, the torque's κ s: the
+    value of a term the torque carries in the ratio κ (channels × instants)."""
+    value = np.zeros((len(problem.channels), s.size))
+    value[0] = s
+    if problem.has_torque:
+        value[1] = kappa * s
+    return value
+
+
+def carried_jacobian(problem, columns: np.ndarray, index, s: np.ndarray, theta: np.ndarray, kappa_at: int) -> np.ndarray:
+    """Derivatives of :func:`carried` (channels × instants × parameters): ∂s/∂θ[index] =
+    ``columns`` in the thrust, κ times them in the torque, and ∂(κ s)/∂κ = s at ``kappa_at``."""
+    jac = np.zeros((len(problem.channels), s.size, theta.size))
+    jac[0][:, index] = columns
+    if problem.has_torque:
+        jac[1][:, index] = theta[kappa_at] * columns
+        jac[1, :, kappa_at] = s
+    return jac
+
+
 def proportional_term(problem, X: np.ndarray, theta: np.ndarray) -> Term:
     """The term of a thrust shape s = X θ[:k] (X instants × k) that the torque carries in the ratio
     κ = θ[k] (when the recording has torque): value [s, κ s], derivatives ∂/∂θ[:k] = [X, κ X] and
     ∂/∂κ = [0, s]. Clogging and softening are such terms."""
     k = X.shape[1]
     s = X @ theta[:k]
-    n_ch = len(problem.channels)
-    value = np.zeros((n_ch, s.size))
-    value[0] = s
-    if problem.has_torque:
-        value[1] = theta[k] * s
-
-    def derivatives() -> tuple[np.ndarray, None]:
-        jac = np.zeros((n_ch, s.size, theta.size))
-        jac[0, :, :k] = X
-        if problem.has_torque:
-            jac[1, :, :k], jac[1, :, k] = theta[k] * X, s
-        return jac, None
-
-    return Term(value, derivatives)
+    return Term(carried(problem, s, theta[k] if problem.has_torque else 0.0),
+                lambda: (carried_jacobian(problem, X, slice(0, k), s, theta, k), None))
 
 
 @dataclass(frozen=True)
