@@ -124,28 +124,6 @@ class Factor:
         return f"{self.method}: {self.n:,} unknowns, set-up {self.setup_s:.2f} s{per}"
 
 
-def upper_triangle(A: sp.csr_matrix, dtype=np.float64) -> sp.csr_matrix:
-    """The upper triangle (diagonal included) of a CSR matrix with sorted indices, its values
-    as ``dtype``: one pass over the entries (scipy's ``triu`` goes through COO, 4× slower)."""
-    rows = np.repeat(np.arange(A.shape[0], dtype=A.indices.dtype), np.diff(A.indptr))
-    keep = A.indices >= rows
-    del rows
-    kept = np.concatenate([[0], np.cumsum(keep, dtype=np.int64)])
-    return sp.csr_matrix((A.data[keep].astype(dtype), A.indices[keep], kept[A.indptr]), shape=A.shape)
-
-
-def upper_blocks(A: sp.csr_matrix | sp.bsr_matrix, size: int, dtype=np.float64) -> sp.bsr_matrix:
-    """The upper triangle of ``size``² blocks (diagonal blocks whole) of a CSR matrix, or of a
-    BSR matrix of such blocks (no conversion then), as BSR with values ``dtype``."""
-    B = A if A.format == "bsr" and A.blocksize == (size, size) else sp.bsr_matrix(A, blocksize=(size, size))
-    B.sort_indices()
-    rows = np.repeat(np.arange(B.shape[0] // size, dtype=B.indices.dtype), np.diff(B.indptr))
-    keep = B.indices >= rows
-    del rows
-    kept = np.concatenate([[0], np.cumsum(keep, dtype=np.int64)])
-    return sp.bsr_matrix((B.data[keep].astype(dtype), B.indices[keep], kept[B.indptr]), shape=A.shape)
-
-
 def free_block(A: sp.csr_matrix | sp.bsr_matrix, free: np.ndarray, upper: bool = False,
                dtype=None) -> sp.csr_matrix | sp.bsr_matrix:
     """A[free][:, free] of a CSR matrix with sorted indices, in one pass over its entries (the
@@ -170,6 +148,20 @@ def free_block(A: sp.csr_matrix | sp.bsr_matrix, free: np.ndarray, upper: bool =
     restricted = type(A)((data, columns[keep], indptr), shape=shape)
     restricted.has_sorted_indices = A.has_sorted_indices
     return restricted
+
+
+def upper_triangle(A: sp.csr_matrix, dtype=np.float64) -> sp.csr_matrix:
+    """The upper triangle (diagonal included) of a CSR matrix with sorted indices, its values
+    as ``dtype``: one pass over the entries (scipy's ``triu`` goes through COO, 4× slower)."""
+    return free_block(A, np.arange(A.shape[0]), upper=True, dtype=dtype)
+
+
+def upper_blocks(A: sp.csr_matrix | sp.bsr_matrix, size: int, dtype=np.float64) -> sp.bsr_matrix:
+    """The upper triangle of ``size``² blocks (diagonal blocks whole) of a CSR matrix, or of a
+    BSR matrix of such blocks (no conversion then), as BSR with values ``dtype``."""
+    B = A if A.format == "bsr" and A.blocksize == (size, size) else sp.bsr_matrix(A, blocksize=(size, size))
+    B.sort_indices()
+    return free_block(B, np.arange(B.shape[0] // size), upper=True, dtype=dtype)
 
 
 class Restriction:
