@@ -248,7 +248,7 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
     alpha, beta_r = damping
     load_norm = _column_norms(P, A.T).max()
     if np.any(u):
-        load_norm = max(load_norm, np.linalg.norm(fs.K @ u))
+        load_norm = max(load_norm, np.linalg.norm(fs.stiffness_times(u)))
     if load_norm == 0:
         return None
     # a start away from rest: its state and initial acceleration M⁻¹(f0 − K u0 − C v0) are in
@@ -272,7 +272,7 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
         Q = orthonormal_complement(V[:, :m], new)
         if Q.shape[1] == 0:
             break
-        KQ, MQ = fs.K @ Q, fs.mass(Q)
+        KQ, MQ = fs.stiffness_times(Q), fs.mass(Q)
         new = fs.factor.solve(MQ)  # K⁻¹M Q: the next block, and the indicator's K⁻¹MV
         V[:, m:m + Q.shape[1]] = Q
         blocks.append(slice(m, m + Q.shape[1]))
@@ -407,8 +407,8 @@ def _initial_acceleration(fs: FactorizedSystem, f0: np.ndarray, u: np.ndarray, v
     :data:`ROUNDOFF` of ‖f0‖ and ‖K u0‖), as for a start from the quasi-static state u0 = K⁻¹f0
     without damping, where a solve would only turn round-off into a basis vector."""
     alpha, beta_r = damping
-    Ku = fs.K @ u
-    r0 = f0 - Ku - alpha * fs.mass(v) - beta_r * (fs.K @ v)
+    Ku = fs.stiffness_times(u)
+    r0 = f0 - Ku - alpha * fs.mass(v) - beta_r * (fs.stiffness_times(v))
     if np.linalg.norm(r0) <= ROUNDOFF * max(np.linalg.norm(f0), np.linalg.norm(Ku)):
         return np.zeros_like(u)
     return _solve_mass(fs, r0)

@@ -346,7 +346,7 @@ def _resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel, shapes: 
                                rtol=RESOLVED_RTOL, static_shapes=shapes)
     cheap = [ch for ch in channels if ch.name in ("deflection", "drill_point")]
     if march.scheme == "reduced":
-        stiffness = march.basis.T @ (fs.K @ march.basis)
+        stiffness = march.basis.T @ fs.stiffness_times(march.basis)
         resolved = fe.reduced_history(cheap, march.full_basis(), march.coordinates, metric=stiffness)
     else:  # stepped: nothing kept; measure the resolved run again through a recorder
         recorder = fe.StepRecorder(cheap, len(A))
@@ -354,7 +354,7 @@ def _resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel, shapes: 
                                    observer=recorder, scheme="stepping", static_shapes=shapes)
         resolved = recorder.history()
     Q, R = np.linalg.qr(march.static_shapes)  # the quasi-static response K⁻¹P a(t) = Q (R a(t))
-    quasi = fe.reduced_history(cheap, fs.bc.expand(Q), R @ A.T, metric=Q.T @ (fs.K @ Q))
+    quasi = fe.reduced_history(cheap, fs.bc.expand(Q), R @ A.T, metric=Q.T @ fs.stiffness_times(Q))
     return {"resolved_step_s": dt, "resolved_steps": len(A) - 1,
             "resolved_window_s": (float(history.time_s[0]), float(history.time_s[-1])),
             "resolved_vectors": march.n_vectors, "resolved_indicator": march.indicator,
