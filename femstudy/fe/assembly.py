@@ -144,22 +144,6 @@ def jacobians(points: np.ndarray, tets: np.ndarray):
     return np.linalg.inv(J), det
 
 
-def strain_matrices(mesh: skfem.MeshTet, ref: Reference, cells: np.ndarray):
-    """B (n, nq, 6, 3 nbf) with ε = B u_e (Voigt, engineering shear) at the stiffness
-    quadrature points of ``ref``, and the integration weights dV (n, nq) [mm³], for elements
-    ``cells`` of ``mesh``."""
-    invJ, det = jacobians(mesh.p.T, mesh.t.T[cells])
-    G = np.einsum("qak,ekj->eqaj", ref.grad, invJ)  # ∂N_a/∂x_j = Σ_k ∂N_a/∂ξ_k (J⁻¹)_kj
-    n, nq, nbf = G.shape[:3]
-    B = np.zeros((n, nq, 6, nbf, 3))
-    for c in range(3):
-        B[:, :, c, :, c] = G[..., c]
-    for row, (i, j) in zip((3, 4, 5), ((1, 2), (0, 2), (0, 1))):
-        B[:, :, row, :, i] = G[..., j]
-        B[:, :, row, :, j] = G[..., i]
-    return B.reshape(n, nq, 6, 3 * nbf), np.abs(det)[:, None] * ref.weights
-
-
 def _node_pattern(cells: np.ndarray, n_nodes: int):
     """Node-level CSR pattern (indptr, indices) and, for every (element, a, b) entry, the
     position of the pair (cells[e, a], cells[e, b]) in it.
