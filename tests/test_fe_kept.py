@@ -44,6 +44,25 @@ def test_a_repeated_solve_is_served_without_factorising(tmp_path):
     assert second.factorisations == 0
 
 
+def test_node_blocks_are_kept_under_their_own_fingerprint_and_served(tmp_path):
+    """K_ff as BSR of 3×3 node blocks (the study's, with whole-node clamps) is kept and served
+    without a CSR copy; the same matrix as CSR is another key, so neither store is taken for
+    the other's format."""
+    A = laplacian_3d()
+    blocks = A.tobsr(blocksize=(3, 3))
+    assert fingerprint(blocks) != fingerprint(A) and fingerprint(blocks) == fingerprint(blocks.copy())
+    b = np.random.default_rng(4).standard_normal(A.shape[0])
+    first = kept(blocks, tmp_path)
+    x = first.solve(b)
+    first.close()
+    second = kept(blocks, tmp_path)
+    assert second.A.format == "bsr" and second.loaded == 1
+    assert np.allclose(second.solve(2 * b), 2 * x, rtol=0, atol=1e-12 * np.abs(x).max())
+    assert second.factorisations == 0 and kept(A, tmp_path).loaded == 0
+    exact = spla.spsolve(A.tocsc(), b)
+    assert np.allclose(x, exact, rtol=0, atol=1e-9 * np.abs(exact).max())
+
+
 def test_a_new_direction_is_solved_and_kept(tmp_path):
     A = laplacian_3d()
     rng = np.random.default_rng(2)

@@ -38,7 +38,6 @@ class FactorizedSystem:
                 solutions; else (a static solve with clamps holding whole nodes factorises a
                 :class:`~femstudy.fe.linsolve.Restriction`) they are formed when first asked for
     stiffness : K_ff [N/mm]: BSR of 3×3 node blocks when the clamps hold whole nodes, else CSR
-                (CSR whenever kept solutions are used)
     K, M      : K_ff [N/mm] and M_ff [tonne], CSR on one shared pattern, so K + c M is a sum of
                 their data arrays; each is formed when first asked for (a static solve, the
                 reduced transient and the modal analysis need neither: their products go
@@ -153,9 +152,8 @@ def factorize(system: FESystem, bc: Constraints, solver: str = "auto", keep: Pat
             return FactorizedSystem(system, bc, factor, restriction.formed)
         K = free_block(system.K, bc.free)
         return FactorizedSystem(system, bc, make(K), K)
-    # kept solutions are found by K_ff's CSR entries (the same as restricting the CSR K); the
-    # blocks are not kept beside them (a factorisation, when one is needed, converts back)
-    entries = free_block(system.K, bc.free) if nodes is None else free_block(system.K_blocks, nodes).tocsr()
+    # kept solutions are found by K_ff's entries: its node blocks when the clamps hold whole nodes
+    entries = free_block(system.K, bc.free) if nodes is None else free_block(system.K_blocks, nodes)
     return FactorizedSystem(system, bc, KeptSolutions(entries, partial(make, entries), keep), entries)
 
 
