@@ -1,8 +1,9 @@
 """The files of a study's results folder: time series, figures, picture, fields, summary and report.
 
 They are written into the folder being built (:func:`femstudy.atomic.atomic_folder`, opened by
-:func:`femstudy.study.run.run_study`): :func:`write_files` by whatever executor the study was
-given (:mod:`femstudy.execution`), :func:`write_summary` last, by the study itself."""
+:func:`femstudy.study.run.run_study`): :func:`write_plots` and :func:`write_views` by whatever
+executor the study was given (:mod:`femstudy.execution`), side by side, :func:`write_summary`
+last, by the study itself."""
 
 from __future__ import annotations
 
@@ -29,42 +30,58 @@ def warp_factor(model, dynamic) -> float:
     return render.nice_warp_factor(dynamic.peak("max_deflection_mm").value, float(model.frame.length_mm))
 
 
-def write_files(folder: Path, model, step, times) -> Figures:
-    """Write timeseries.csv, the figures (loads, deflection and von Mises against time),
-    femur.png (the deformed femur at the kept step nearest the dynamic peak deflection) and
-    fields/*.pvd into ``folder``, as the case asks; return what was pictured.
+def write_plots(folder: Path, model, step) -> tuple[str, ...]:
+    """Write timeseries.csv and, as the case asks, the figures (loads, deflection and von Mises
+    against time) into ``folder``; return the figures' file names.
 
-    ``model`` is the study's :class:`~femstudy.study.global_model.GlobalModel`, ``step`` its
-    :class:`~femstudy.study.run.ThesisStep` (the loadings' results, the basis that spans every
+    ``model`` is the study's :class:`~femstudy.study.global_model.GlobalModel` and ``step`` its
+    :class:`~femstudy.study.run.ThesisStep` (the loadings' results)."""
+    results = [step.dynamic, step.static]
+    (folder / "timeseries.csv").write_text(timeseries_csv(results))
+    return tuple(figures.write_figures(folder, model.case.name, results)) if model.case.output.figures else ()
+
+
+def write_views(folder: Path, model, step, times) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """Write, as the case asks, femur.png (the deformed femur at the kept step nearest the
+    dynamic peak deflection) and fields/*.pvd into ``folder``; return (pictures, fields).
+
+    ``step`` is the study's :class:`~femstudy.study.run.ThesisStep` (the basis that spans every
     kept field, its von Mises projection, the kept fields and the static field [mm]) and
-    ``times`` the case's time grid [s].
-    """
+    ``times`` the case's time grid [s]. Its own part of the study's executor, beside
+    :func:`write_plots`: the two import and draw with different libraries (pyvista and VTK,
+    matplotlib) and take about as long as each other."""
     case, femur, system = model.case, model.femur, model.system
-    dynamic, static, kept = step.dynamic, step.static, step.fields
-    (folder / "timeseries.csv").write_text(timeseries_csv([dynamic, static]))
-    written = figures.write_figures(folder, case.name, [dynamic, static]) if case.output.figures else []
+    dynamic, kept = step.dynamic, step.fields
     picture = case.output.screenshot and kept
-    base = fields.grid(system.nodes, system.cells, system.region, femur.frame.up) if picture or case.output.fields \
-        else None
+    if not (picture or case.output.fields):
+        return (), ()
+    base = fields.grid(system.nodes, system.cells, system.region, femur.frame.up)
 
     def with_solution(u):
         return fields.with_solution(base, u, _von_mises_vertices(system, step.von_mises_rows, step.basis.T @ u),
                                     system.cells)
 
+    pictures = ()
     if picture:
         peak_step = int(np.searchsorted(times, dynamic.peak("max_deflection_mm").time_s))
         n = min(kept, key=lambda k: abs(k - peak_step))
         render.deformed_picture(folder / "femur.png", with_solution(kept[n]), femur.site.entry_point,
                                 femur.site.direction, warp_factor(femur, dynamic),
                                 f"{case.name}: dynamic loading, t = {times[n]:.2f} s")
-        written.append("femur.png")
+        pictures = ("femur.png",)
     written_fields = ()
     if case.output.fields:
         steps = sorted(k for k in kept if k % case.output.fields_every == 0 or k == len(times) - 1)
         fields.write_series(folder / "fields", "dynamic", [(float(times[k]), with_solution(kept[k])) for k in steps])
         fields.write_series(folder / "fields", "static", [(0.0, with_solution(step.static_u))])
         written_fields = ("fields/dynamic.pvd", "fields/static.pvd")
-    return Figures(warp_factor(femur, dynamic), tuple(written), written_fields)
+    return pictures, written_fields
+
+
+def pictured(model, step, plots: tuple[str, ...], views: tuple[tuple[str, ...], tuple[str, ...]]) -> Figures:
+    """What :func:`write_plots` and :func:`write_views` wrote, with the pictures' warp factor."""
+    pictures, written_fields = views
+    return Figures(warp_factor(model.femur, step.dynamic), plots + pictures, written_fields)
 
 
 def write_summary(folder: Path, result) -> None:

@@ -153,11 +153,12 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                     case.loads.application == "hole", bool(case.analysis.modes)), sensitivity.Variants.read_back))
         step = _thesis_step(case, fs, model, loading, shapes)
         marched = time.perf_counter()
-        files_part = None
+        file_parts = ()
         if folder is not None:
             log.info("writing results to %s", out_dir)
-            files_part = executor.start("figures and fields", partial(output.write_files, folder, model, step,
-                                                                      loading.times_s))
+            file_parts = (executor.start("figures", partial(output.write_plots, folder, model, step)),
+                          executor.start("picture and fields", partial(output.write_views, folder, model, step,
+                                                                       loading.times_s)))
         dynamics, modal_done = _modes_and_resolved(case, loading, fs, model, shapes, step, answers, key)
         baseline = sensitivity.baseline_answers(fs, model, loading, dynamics.frequencies_Hz[0]
                                                 if dynamics.frequencies_Hz else None) if sensitivity_part else None
@@ -172,7 +173,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                                                   sensitivity.uncertainties(analysis),
                                                   -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds,
                                                   runs.kept)
-        figures = None if files_part is None else files_part.result()
+        figures = output.pictured(model, step, *(part.result() for part in file_parts)) if file_parts else None
         waited = time.perf_counter()
         solver_record = SolverRecord(model.system.order, model.system.n_dofs, fs.method,
                                      fs.factor.factorisations + dynamics.refactorisations, fs.factor.served,
@@ -183,7 +184,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                           factor_s=factorised - assembled, dynamic_s=marched - factorised,
                           modal_s=(modal_done or marched) - marched, resolved_s=resolved - (modal_done or marched),
                           hole_s=None if hole_part is None else hole_part.seconds,
-                          files_s=None if files_part is None else files_part.seconds,
+                          files_s=max(part.seconds for part in file_parts) if file_parts else None,
                           waited_for_parts_s=waited - resolved, parallel=bool(getattr(executor, "forking", False)),
                           total_s=time.perf_counter() - start)
         result = StudyResult(case, model.femur, loading, solver_record, step.dynamic, step.static, dynamics, hole,
