@@ -12,7 +12,7 @@ import textwrap
 import numpy as np
 
 from femstudy import atomic
-from femstudy.recordings.figures import pyplot, save
+from femstudy.plotting import pyplot, save
 
 UNITS = {"thrust_N": ("thrust", "N"), "torque_Nmm": ("torque", "N·mm")}
 #: A calibration scale further than this from 1 is pointed out.

@@ -4,25 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from femstudy import atomic
+from femstudy.plotting import pyplot, save
 
 PHASE_KEYS = (("true_contact_s", "contact"), ("true_full_engagement_s", "full engagement"),
               ("true_breakthrough_s", "breakthrough"), ("true_retraction_s", "retraction"))
 
 
-def pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def save(fig, path) -> None:
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format=str(path).rsplit(".", 1)[-1].lower())
-    pyplot().close(fig)
 
 
 def plot_recording(path, rec, marks: dict[str, float] | None = None) -> None:

@@ -4,26 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from femstudy import atomic
+from femstudy.plotting import pyplot, save
 from femstudy.study.results import LoadingResult
 
 STYLE = {"dynamic": {"color": "tab:orange", "label": "dynamic (cutting + chip evacuation)"},
          "static": {"color": "tab:blue", "label": "static Allotta"}}
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig, path: Path) -> None:
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    fig.clf()
 
 
 def _values(result: LoadingResult, quantity: str):
@@ -44,7 +29,7 @@ def _panel(ax, results, quantity, ylabel, linestyle="-", suffix=""):
 
 def write_figures(folder: Path, title: str, results: list[LoadingResult]) -> list[str]:
     """Write loads.png, deflection.png and von_mises.png into ``folder``; return their names."""
-    plt = _pyplot()
+    plt = pyplot()
     written = []
 
     fig, (ax_f, ax_t) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True, constrained_layout=True)
@@ -52,7 +37,7 @@ def write_figures(folder: Path, title: str, results: list[LoadingResult]) -> lis
     _panel(ax_t, results, "torque_Nmm", "torque [N·mm]")
     ax_t.set_xlabel("time after contact [s]")
     fig.suptitle(f"{title}: drilling loads")
-    _save(fig, folder / "loads.png")
+    save(fig, folder / "loads.png")
     written.append("loads.png")
 
     for key, dashed, axis_label, dashed_label, what, name in (
@@ -68,7 +53,6 @@ def write_figures(folder: Path, title: str, results: list[LoadingResult]) -> lis
         ax.legend(fontsize=8, loc="upper left")
         ax.set_xlabel("time after contact [s]")
         ax.set_title(f"{title}: {what}")
-        _save(fig, folder / name)
+        save(fig, folder / name)
         written.append(name)
-    plt.close("all")
     return written
