@@ -104,10 +104,12 @@ def code_fingerprint() -> str:
 
 
 def kept_answer(folder: Path | None, what: str, parts: tuple, compute: Callable[[], T],
-                mark_kept: Callable[[T], T] = lambda answer: answer) -> T:
+                mark_kept: Callable[[T], T] = lambda answer: answer,
+                worth_keeping: Callable[[T], bool] = lambda answer: True) -> T:
     """``compute()``, or the answer kept in ``folder`` under the digest of ``parts`` (then
     passed through ``mark_kept``, so the result can say it was read); a computed answer is
-    kept there. ``folder`` None computes without keeping (``--no-kept-solutions``)."""
+    kept there when ``worth_keeping`` says so. ``folder`` None computes without keeping
+    (``--no-kept-solutions``)."""
     if folder is None:
         return compute()
     start = time.perf_counter()
@@ -125,6 +127,8 @@ def kept_answer(folder: Path | None, what: str, parts: tuple, compute: Callable[
         except (OSError, EOFError, pickle.UnpicklingError, AttributeError, ImportError, ValueError, TypeError) as exc:
             log.warning("ignoring unreadable kept %s %s (%s)", what, path, exc)
     answer = compute()
+    if not worth_keeping(answer):
+        return answer
     try:
         with atomic_path(path) as tmp, open(tmp, "wb") as out:
             pickle.dump((key, answer), out, protocol=pickle.HIGHEST_PROTOCOL)

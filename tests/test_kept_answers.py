@@ -81,3 +81,15 @@ def test_an_unwritable_folder_costs_a_recomputation_not_the_run(tmp_path, caplog
     with caplog.at_level(logging.WARNING):
         assert kept_answer(blocked, "resolved transient", ("a",), lambda: 7) == 7
     assert "could not keep the resolved transient" in caplog.text
+
+
+def test_an_answer_not_worth_keeping_is_computed_every_time(tmp_path):
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return np.zeros(10)
+
+    for _ in range(2):
+        kept_answer(tmp_path, "assembly", ("mesh",), compute, worth_keeping=lambda answer: answer.size < 10)
+    assert len(calls) == 2 and not list(tmp_path.glob("assembly-*.pickle"))

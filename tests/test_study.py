@@ -3,6 +3,7 @@
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -177,8 +178,6 @@ def test_a_repeated_study_factorises_nothing_and_gives_the_same_maxima(tmp_path,
     maxima, frequencies, resolved peak and hole stresses are those of a study that factorises
     (here twice the loads: exactly twice the response). The study that factorises runs in one
     process, the others in lanes (femstudy.lanes) where they fork: the same numbers either way."""
-    import shutil
-
     from femstudy.lanes import can_fork
 
     shutil.rmtree(mesh_cache / "solutions", ignore_errors=True)
@@ -226,6 +225,26 @@ def test_a_study_repeated_with_the_same_inputs_reads_its_answers_back(tmp_path, 
     report = (out / "report.md").read_text()
     assert "this run read it, kept from an earlier run" in report and "Verification in this run" not in report
     assert "Verification, made by an earlier run of the same inputs and code" in report
+
+
+def test_a_kept_assembly_is_the_assembly(tmp_path, mesh_cache):
+    """prepare(keep_assembly=True) keeps the assembled model among the answers and reads it back
+    unchanged; without it nothing is kept."""
+    from femstudy.study.global_model import prepare
+
+    case = parse_case(CASE.format(order=1, scale=1.0, step=1.0, screenshot="false", fields="false",
+                                  resolved="false", application="surface_patch", sensitivity="false"))
+    cache = tmp_path / "cache"
+    shutil.copytree(mesh_cache, cache, ignore=shutil.ignore_patterns("answers", "solutions"))
+    fresh = prepare(case, cache).system
+    assert not list((cache / "answers").glob("assembly-*.pickle"))
+    prepare(case, cache, keep_assembly=True)
+    kept = prepare(case, cache, keep_assembly=True).system
+    assert len(list((cache / "answers").glob("assembly-*.pickle"))) == 1
+    for name in ("data", "indices", "indptr"):
+        assert np.array_equal(getattr(kept.K_blocks, name), getattr(fresh.K_blocks, name))
+        assert np.array_equal(getattr(kept.M_nodes, name), getattr(fresh.M_nodes, name))
+    assert np.array_equal(kept.nodes, fresh.nodes) and np.array_equal(kept.cells, fresh.cells)
 
 
 def test_view_writes_a_screenshot(p2_run, tmp_path):

@@ -85,7 +85,8 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
     keep_solutions : bool
         Serve the solves from the solutions an earlier run kept for the same stiffness matrices
         and keep this run's (:mod:`femstudy.fe.kept`): a repeated study, or one that changes only
-        the load histories, then factorises nothing. False factorises every time.
+        the load histories, then factorises nothing; the assembled model is kept and read back
+        too. False assembles and factorises every time.
     executor : Executor, optional
         Runs the hole models and the writing of the figures and fields
         (:mod:`femstudy.execution`); by default they run in this process. The command line
@@ -112,7 +113,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
     out_of_range = plausibility.check_inputs(case, bones_dir, force)
     log.info("case '%s': building or loading the femur mesh", case.name)
     checked = time.perf_counter()
-    model = prepare(case, cache_dir)
+    model = prepare(case, cache_dir, keep_assembly=keep_solutions)
     out_of_range += plausibility.check_site(case, model.femur, force)
     site = model.femur.site
     loading = case_loading(case, site.cortical_thickness_mm, None if bones_dir is None else Path(bones_dir),
