@@ -59,3 +59,23 @@ def test_late_clogging_is_named_and_predicts_held_out_blocks(folder):
     thrust = js["fit"]["channels"]["thrust_N"]
     # a block held out leaves the flexible monotone rise free to take any monotone path through it
     assert thrust["improved"]["r2_heldout"] > 0.95 and thrust["baseline"]["r2_heldout"] < 0.7
+
+
+@pytest.mark.slow
+def test_a_mechanism_a_shape_takes_most_of_is_not_named(tmp_path, monkeypatch):
+    """The tuning case behind verdict.BESIDE_SIZE_SHARE (bench/formbench, tuning seed 1): a
+    spindle slowing under load. A load shape outside the catalogue beats clogging by ΔBIC 915;
+    beside it clogging still lowers the BIC by 59 but keeps 0.19 of its size. Counted as
+    standing (no size share), clogging is named; with the share it is not, and the event is
+    reported over the decoy's interval."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from bench.formbench.score import diagnose_case
+    from femstudy.diagnosis import verdict
+
+    case = make_formbench_case("decoy:spindle_slowdown", 120_003, "tuning", tmp_path)
+    truth = tmp_path / f"{case.name}.truth.json"
+    kept = diagnose_case(truth)
+    assert not set(kept.named) & FOUR and kept.refused is None
+    assert overlapping(kept.unexplained, kept.case["decoy"])
+    monkeypatch.setattr(verdict, "BESIDE_SIZE_SHARE", 0.0)
+    assert "chip_clogging" in diagnose_case(truth).named
