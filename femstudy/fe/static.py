@@ -40,8 +40,8 @@ class FactorizedSystem:
     stiffness : K_ff [N/mm]: BSR of 3×3 node blocks when the clamps hold whole nodes, else CSR
     K, M      : K_ff [N/mm] and M_ff [tonne], CSR on one shared pattern, so K + c M is a sum of
                 their data arrays; each is formed when first asked for (a static solve, the
-                reduced transient and the modal analysis need neither: their products go
-                through :meth:`stiffness_times` and :meth:`mass`)
+                modal analysis and a reduced transient from rest need neither: their products
+                go through :meth:`stiffness_times` and :meth:`mass`)
     """
 
     system: FESystem
@@ -78,19 +78,22 @@ class FactorizedSystem:
         f = np.asarray(f, dtype=float)
         return self.bc.expand(self.factor.solve(f[self.bc.free]))
 
+    def _padded(self, x_free: np.ndarray) -> np.ndarray:
+        """x on every DOF, zero on the clamps: (n_dofs,) or (n_dofs, k)."""
+        full = np.zeros((self.system.n_dofs,) + x_free.shape[1:])
+        full[self.bc.free] = x_free
+        return full
+
     def stiffness_times(self, x_free: np.ndarray) -> np.ndarray:
         """K_ff x [N] for x (n_free,) or (n_free, k) [mm], as K's assembled blocks times x
         padded with zeros on the clamps: K_ff itself is not formed (at 16 mm forming its CSR
         copy costs 0.3 s, about a tenth of a whole static process)."""
-        full = np.zeros((self.system.n_dofs,) + x_free.shape[1:])
-        full[self.bc.free] = x_free
-        return (self.system.K_blocks @ full)[self.bc.free]
+        return (self.system.K_blocks @ self._padded(x_free))[self.bc.free]
 
     def mass(self, x_free: np.ndarray) -> np.ndarray:
         """M_ff x [N per mm/s²] for x (n_free,) or (n_free, k), through the nodal mass
         (M = M_nodes ⊗ I₃: a ninth of M's entries to read)."""
-        full = np.zeros((self.system.n_dofs,) + x_free.shape[1:])
-        full[self.bc.free] = x_free
+        full = self._padded(x_free)
         nodal = full.reshape(self.system.M_nodes.shape[0], -1)  # a node's 3 (× k) values per row
         return (self.system.M_nodes @ nodal).reshape(full.shape)[self.bc.free]
 

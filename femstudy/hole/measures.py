@@ -19,7 +19,7 @@ exclusion zone around it.
   points within ``cut_margin_mm`` of a cut-face node (there the local solution is the
   interpolated global data) and points within the clamped length of either end of the femur.
 
-Stresses are the elements' own P2 fields at the points (σ = D B u_e), strains ε = D⁻¹σ
+Stresses are the elements' own P2 fields at the points (σ = D ε(u)), strains ε = D⁻¹σ
 (tensor strains for the principal values). Units: mm, MPa, strain [-].
 """
 
