@@ -2,8 +2,8 @@
 
 They are written into the folder being built (:func:`femstudy.atomic.atomic_folder`, opened by
 :func:`femstudy.study.run.run_study`): :func:`write_plots` and :func:`write_views` by whatever
-executor the study was given (:mod:`femstudy.execution`), side by side, :func:`write_summary`
-last, by the study itself."""
+executor the study was given (:mod:`femstudy.execution`; side by side when it forks),
+:func:`write_summary` last, by the study itself."""
 
 from __future__ import annotations
 
@@ -48,8 +48,8 @@ def write_views(folder: Path, model, step, times) -> tuple[tuple[str, ...], tupl
     ``step`` is the study's :class:`~femstudy.study.run.ThesisStep` (the basis that spans every
     kept field, its von Mises projection, the kept fields and the static field [mm]) and
     ``times`` the case's time grid [s]. Its own part of the study's executor, beside
-    :func:`write_plots`: the two import and draw with different libraries (pyvista and VTK,
-    matplotlib) and take about as long as each other."""
+    :func:`write_plots`: the two draw with different libraries (pyvista and VTK, matplotlib)
+    and take about as long as each other."""
     case, femur, system = model.case, model.femur, model.system
     dynamic, kept = step.dynamic, step.fields
     picture = case.output.screenshot and kept

@@ -157,9 +157,10 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         file_parts = ()
         if folder is not None:
             log.info("writing results to %s", out_dir)
-            file_parts = (executor.start("figures", partial(output.write_plots, folder, model, step)),
-                          executor.start("picture and fields", partial(output.write_views, folder, model, step,
-                                                                       loading.times_s)))
+            file_parts = (executor.start("figures", partial(output.write_plots, folder, model, step)),)
+            if case.output.screenshot or case.output.fields:
+                file_parts += (executor.start("picture and fields", partial(output.write_views, folder, model, step,
+                                                                            loading.times_s)),)
         dynamics, modal_done = _modes_and_resolved(case, loading, fs, model, shapes, step, answers, key)
         baseline = sensitivity.baseline_answers(fs, model, loading, dynamics.frequencies_Hz[0]
                                                 if dynamics.frequencies_Hz else None) if sensitivity_part else None
@@ -174,7 +175,9 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                                                   sensitivity.uncertainties(analysis),
                                                   -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds,
                                                   runs.kept)
-        figures = output.pictured(model, step, *(part.result() for part in file_parts)) if file_parts else None
+        written = [part.result() for part in file_parts]
+        figures = output.pictured(model, step, written[0], written[1] if len(written) > 1 else ((), ())) \
+            if written else None
         waited = time.perf_counter()
         solver_record = SolverRecord(model.system.order, model.system.n_dofs, fs.method,
                                      fs.factor.factorisations + dynamics.refactorisations, fs.factor.served,
@@ -185,7 +188,8 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                           factor_s=factorised - assembled, dynamic_s=marched - factorised,
                           modal_s=(modal_done or marched) - marched, resolved_s=resolved - (modal_done or marched),
                           hole_s=None if hole_part is None else hole_part.seconds,
-                          files_s=max(part.seconds for part in file_parts) if file_parts else None,
+                          files_s=((max if getattr(executor, "forking", False) else sum)(
+                              part.seconds for part in file_parts) if file_parts else None),
                           waited_for_parts_s=waited - resolved, parallel=bool(getattr(executor, "forking", False)),
                           total_s=time.perf_counter() - start)
         result = StudyResult(case, model.femur, loading, solver_record, step.dynamic, step.static, dynamics, hole,

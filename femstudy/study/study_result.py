@@ -120,8 +120,9 @@ class SolverRecord:
 @dataclass(frozen=True)
 class Timings:
     """Wall times of a study's stages [s]; ``hole_s`` and ``files_s`` are the parts an executor
-    ran (None when there were none; ``files_s`` the longer of the figures and the picture and
-    fields, which run side by side), ``waited_for_parts_s`` the time the study waited for them,
+    ran (None when there were none; ``files_s`` the figures' and the picture and fields', the
+    longer of the two when they ran side by side in forked processes, else their sum),
+    ``waited_for_parts_s`` the time the study waited for them,
     ``parallel`` whether they ran in other processes."""
 
     mesh_s: float
