@@ -245,6 +245,20 @@ def test_a_kept_assembly_is_the_assembly(tmp_path, mesh_cache):
         assert np.array_equal(getattr(kept.K_blocks, name), getattr(fresh.K_blocks, name))
         assert np.array_equal(getattr(kept.M_nodes, name), getattr(fresh.M_nodes, name))
     assert np.array_equal(kept.nodes, fresh.nodes) and np.array_equal(kept.cells, fresh.cells)
+    assert kept.timings == {"kept_from_earlier_run": True} and "pattern_s" in fresh.timings
+
+
+def test_only_the_newest_kept_assemblies_stay(tmp_path):
+    from femstudy.study.global_model import KEPT_ASSEMBLIES, _prune_kept_assemblies
+
+    for age in range(KEPT_ASSEMBLIES + 2):
+        path = tmp_path / f"assembly-{age}.pickle"
+        path.write_bytes(b"")
+        os.utime(path, (1000.0 - age, 1000.0 - age))
+    (tmp_path / "hole-models-0.pickle").write_bytes(b"")
+    _prune_kept_assemblies(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [f"assembly-{age}.pickle" for age in range(KEPT_ASSEMBLIES)] + ["hole-models-0.pickle"])
 
 
 def test_view_writes_a_screenshot(p2_run, tmp_path):
