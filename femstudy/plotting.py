@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from femstudy import atomic
 
-#: Resolution of every figure femstudy writes [dots per inch].
+#: Resolution of the study's, the recordings' and the load models' figures [dots per inch].
 DPI = 130
 
 

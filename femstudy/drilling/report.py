@@ -12,6 +12,7 @@ import numpy as np
 from femstudy import atomic
 from femstudy.drilling import registry
 from femstudy.drilling.history import DrillingConditions, LoadHistory, evaluate
+from femstudy.plotting import pyplot, save
 
 log = logging.getLogger(__name__)
 
@@ -72,11 +73,7 @@ def write_csv(path, histories: list[LoadHistory]) -> None:
 
 def plot(path, cond: DrillingConditions, histories: list[LoadHistory]) -> None:
     """Thrust and torque against time, all models overlaid, phases marked; saved atomically."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, (ax_f, ax_t) = plt.subplots(2, 1, figsize=(8, 7.5), sharex=True, constrained_layout=True)
     for h in histories:
         model = registry.get(h.model)
@@ -98,9 +95,7 @@ def plot(path, cond: DrillingConditions, histories: list[LoadHistory]) -> None:
         ax.grid(True, alpha=0.3)
         ax.set_ylim(bottom=0)
         ax.legend(fontsize=8, loc="best", framealpha=0.9)
-    with atomic.atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=130, format=str(path).rsplit(".", 1)[-1].lower())
-    plt.close(fig)
+    save(fig, path)
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,6 @@ PHASE_KEYS = (("true_contact_s", "contact"), ("true_full_engagement_s", "full en
               ("true_breakthrough_s", "breakthrough"), ("true_retraction_s", "retraction"))
 
 
-
-
 def plot_recording(path, rec, marks: dict[str, float] | None = None) -> None:
     """Raw thrust and torque against time; phase times (the header's true_* or ``marks``) dashed."""
     plt = pyplot()
