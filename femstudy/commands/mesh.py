@@ -38,7 +38,8 @@ def run(args: argparse.Namespace) -> int:
     surface = femur_spec(case).surface
     check_output_folder(out, "mesh outputs", inputs=[args.case, *([surface] if surface else [])],
                         cache_dir=args.settings.cache_dir)
-    check_meshing(case, surface_file(femur_spec(case), args.settings.cache_dir), available_memory_bytes())
+    check_meshing(case, surface_file(femur_spec(case), args.settings.cache_dir), available_memory_bytes(),
+                  args.settings.cache_dir)
     model = mesh_case(case, out, cache_dir=args.settings.cache_dir)
     print(summary_text(model))
     print(f"\nwrote {out}/: {', '.join(model.stats['written'])}")

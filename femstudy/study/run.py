@@ -109,7 +109,8 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
     cache_dir = Path(cache_dir)
     if mesh_size_mm is not None:  # so that summary.json echoes the size actually used
         case = with_overrides(case, {"mesh.size_mm": mesh_size_mm}, what="--mesh-size")
-    feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force)
+    feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force,
+                      cache_dir=cache_dir)
     out_of_range = plausibility.check_inputs(case, bones_dir, force)
     log.info("case '%s': building or loading the femur mesh", case.name)
     checked = time.perf_counter()
