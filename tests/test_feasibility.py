@@ -1,6 +1,6 @@
-"""The preflight estimate's surface size (femstudy.study.feasibility.surface_size): measured
-once, kept in the cache under the file's SHA-256, read back equal; a changed file is measured
-again."""
+"""The preflight estimate's surface size (femstudy.study.feasibility.surface_size): measured,
+kept in the cache under the file's SHA-256 only when asked (a study that passed its checks),
+read back equal; a changed file is measured again."""
 
 import json
 import shutil
@@ -19,6 +19,8 @@ def test_a_kept_surface_size_is_the_measured_one_and_follows_the_file(tmp_path, 
     cache = tmp_path / "cache"
     measured = feasibility.surface_size(surface, cache)
     assert measured == pytest.approx(feasibility.surface_size(SURFACE))   # same bytes, same size
+    assert not cache.exists()                                              # reading keeps nothing
+    feasibility.keep_surface_size(surface, cache)
     kept = list((cache / "surface-sizes").glob("*.json"))
     assert len(kept) == 1 and json.loads(kept[0].read_text())["length_mm"] == measured[1]
 
@@ -31,4 +33,5 @@ def test_a_kept_surface_size_is_the_measured_one_and_follows_the_file(tmp_path, 
     data = surface.read_bytes()
     surface.write_bytes(data[:79] + bytes([data[79] ^ 1]) + data[80:])  # another binary STL header byte
     assert feasibility.surface_size(surface, cache) == pytest.approx(measured)
+    feasibility.keep_surface_size(surface, cache)
     assert len(list((cache / "surface-sizes").glob("*.json"))) == 2

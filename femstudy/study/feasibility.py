@@ -156,36 +156,46 @@ def surface_size(path: Path, cache_dir: Path | None = None) -> tuple[float, floa
     """The enclosed volume [mm³] and length [mm] of a surface file, its units guessed from its
     extent like the meshing does (a file that is not a femur is refused here, in one line).
     Read once per file version in a process (a sweep asks for every point) and, with a
-    ``cache_dir``, kept there under the file's SHA-256 (reading the built-in femur's surface
-    took 0.2 s of a repeated study's 5 s)."""
+    ``cache_dir``, read from there when a study kept it (:func:`keep_surface_size`)."""
     stat = Path(path).stat()
     return _surface_size(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size,
                          None if cache_dir is None else str(Path(cache_dir).resolve()))
+
+
+def keep_surface_size(path: Path, cache_dir: Path) -> None:
+    """Keep the surface's size in ``cache_dir`` under the file's SHA-256, for the estimates of
+    later runs (measuring the built-in femur's surface took 0.2 s of a repeated study's 5 s).
+    Called once a study has passed every check: a refused case writes nothing."""
+    kept = _kept_size_path(Path(path), Path(cache_dir))
+    if kept.is_file():
+        return
+    volume, length = surface_size(path)
+    try:
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        atomic.write_text(kept, json.dumps({"volume_mm3": volume, "length_mm": length}))
+    except OSError as exc:
+        log.warning("could not keep the surface's size in %s (%s)", kept.parent, exc)
 
 
 #: Bumped when the way a surface's volume and length are computed changes.
 SIZE_FORMAT = 1
 
 
-@functools.lru_cache(maxsize=16)
-def _surface_size(path: str, mtime_ns: int, size: int, cache_dir: str | None) -> tuple[float, float]:
+def _kept_size_path(path: Path, cache_dir: Path) -> Path:
     from femstudy.meshing.surface import file_digest
 
-    kept = None if cache_dir is None else Path(cache_dir) / "surface-sizes" / f"{file_digest(Path(path))}-{SIZE_FORMAT}.json"
-    if kept is not None:
+    return cache_dir / "surface-sizes" / f"{file_digest(path)}-{SIZE_FORMAT}.json"
+
+
+@functools.lru_cache(maxsize=16)
+def _surface_size(path: str, mtime_ns: int, size: int, cache_dir: str | None) -> tuple[float, float]:
+    if cache_dir is not None:
         try:
-            stored = json.loads(kept.read_text())
+            stored = json.loads(_kept_size_path(Path(path), Path(cache_dir)).read_text())
             return float(stored["volume_mm3"]), float(stored["length_mm"])
         except (OSError, ValueError, KeyError, TypeError):
-            pass  # not kept yet, or unreadable: measured again
-    volume, length = _measure_surface(Path(path))
-    if kept is not None:
-        try:
-            kept.parent.mkdir(parents=True, exist_ok=True)
-            atomic.write_text(kept, json.dumps({"volume_mm3": volume, "length_mm": length}))
-        except OSError as exc:
-            log.warning("could not keep the surface's size in %s (%s)", kept.parent, exc)
-    return volume, length
+            pass  # not kept, or unreadable: measured
+    return _measure_surface(Path(path))
 
 
 def _measure_surface(path: Path) -> tuple[float, float]:
@@ -200,8 +210,8 @@ def _measure_surface(path: Path) -> tuple[float, float]:
 
 def check_meshing(case, surface: Path, available_bytes: float, cache_dir: Path | None = None) -> Estimate:
     """Refuse (:class:`UserError`) a mesh that cannot be built in ``available_bytes`` of memory
-    (:data:`MESH_BYTES_PER_TET`), as ``femstudy mesh`` builds it without solving; ``cache_dir``
-    keeps the surface's size (:func:`surface_size`)."""
+    (:data:`MESH_BYTES_PER_TET`), as ``femstudy mesh`` builds it without solving; the surface's
+    size is read from ``cache_dir`` when a study kept it there (:func:`surface_size`)."""
     volume, length = surface_size(surface, cache_dir)
     e = estimate(case, volume, length_mm=length)
     budget = MEMORY_SHARE * available_bytes
@@ -217,7 +227,7 @@ def check(case, surface: Path, available_bytes: float, mesh_size_mm: float | Non
           force: bool = False, cache_dir: Path | None = None) -> Estimate:
     """Refuse (:class:`UserError`) a study that cannot fit in ``available_bytes`` of memory, or
     that would take longer than :data:`LONG_S` unless ``force``; return the estimate.
-    ``cache_dir`` keeps the surface's size (:func:`surface_size`)."""
+    The surface's size is read from ``cache_dir`` when a study kept it there (:func:`surface_size`)."""
     volume, length = surface_size(surface, cache_dir)
     e = estimate(case, volume, mesh_size_mm, length)
     budget = MEMORY_SHARE * available_bytes

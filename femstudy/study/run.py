@@ -112,6 +112,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
     feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force,
                       cache_dir=cache_dir)
     out_of_range = plausibility.check_inputs(case, bones_dir, force)
+    feasibility.keep_surface_size(surface_file(femur_spec(case), cache_dir), cache_dir)
     log.info("case '%s': building or loading the femur mesh", case.name)
     checked = time.perf_counter()
     model = prepare(case, cache_dir, keep_assembly=keep_solutions)
