@@ -10,6 +10,7 @@ inconsistent or inward orientation) is listed in :attr:`Surface.repairs`.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -102,7 +103,14 @@ def surface_samples(points: np.ndarray, triangles: np.ndarray, per_extent: int =
 
 
 def file_digest(path: Path) -> str:
-    """SHA-256 of a file's bytes."""
+    """SHA-256 of a file's bytes, read once per file version in a process (a study asks for its
+    surface's digest for the estimate, the kept size and the mesh cache's key)."""
+    stat = Path(path).stat()
+    return _file_digest(str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _file_digest(path: str, mtime_ns: int, size: int) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
