@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from femstudy.atomic import atomic_path
-from femstudy.fe.linsolve import Factor
+from femstudy.fe.linsolve import Factor, compressed
 from femstudy.fe.subspace import orthonormal_complement
 
 log = logging.getLogger(__name__)
@@ -55,7 +55,7 @@ def fingerprint(A: sp.csr_matrix | sp.bsr_matrix) -> str:
     form), each array hashed as stored with its type (no 64-bit copies: 0.1–0.2 s less per K_ff
     of the femur; no CSR copy of a BSR K_ff: 0.2 s less). The same matrix stored as CSR and as
     BSR has two fingerprints: a model's K_ff always comes in the same one."""
-    A = A if sp.issparse(A) and A.format in ("csr", "bsr") else sp.csr_matrix(A)
+    A = compressed(A)
     if not A.has_sorted_indices:
         A = A.sorted_indices()
     blocks = A.blocksize if A.format == "bsr" else ()
@@ -103,7 +103,7 @@ class KeptSolutions(Factor):
 
     def __init__(self, A: sp.spmatrix, factorize: Callable[[], Factor], folder: Path):
         super().__init__(A)
-        self.A = A if sp.issparse(A) and A.format in ("csr", "bsr") else sp.csr_matrix(A)
+        self.A = compressed(A)
         self.path = Path(folder) / f"{fingerprint(self.A)}.npz"
         self._factorize, self._factor = factorize, None
         self.U, self.Z, self.e = np.zeros((self.n, 0)), np.zeros((self.n, 0)), np.zeros(0)

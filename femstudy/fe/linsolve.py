@@ -164,6 +164,23 @@ def upper_blocks(A: sp.csr_matrix | sp.bsr_matrix, size: int, dtype=np.float64) 
     return free_block(B, np.arange(B.shape[0] // size), upper=True, dtype=dtype)
 
 
+def compressed(A) -> sp.csr_matrix | sp.bsr_matrix:
+    """A sparse matrix as CSR, or as it is when it is CSR or BSR already (no copy)."""
+    return A if sp.issparse(A) and A.format in ("csr", "bsr") else sp.csr_matrix(A)
+
+
+def padded(x: np.ndarray, positions: np.ndarray, n: int) -> np.ndarray:
+    """x (len(positions),) or (len(positions), k) placed at ``positions`` of n rows, zero elsewhere."""
+    full = np.zeros((n,) + x.shape[1:])
+    full[positions] = x
+    return full
+
+
+def restricted_product(A, positions: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """A[positions][:, positions] @ X without forming that block: A times X padded with zeros."""
+    return (A @ padded(X, positions, A.shape[0]))[positions]
+
+
 class Restriction:
     """K_ff = K[free][:, free] for a K of 3×3 node blocks (BSR, sorted) and clamps holding whole
     nodes, *not formed*: PARDISO's upper blocks come from K in one pass, and K_ff x is K times x
@@ -191,9 +208,7 @@ class Restriction:
         return self.full.nnz
 
     def __matmul__(self, X: np.ndarray) -> np.ndarray:
-        padded = np.zeros((self.full.shape[0],) + X.shape[1:])
-        padded[self.dofs] = X
-        return (self.full @ padded)[self.dofs]
+        return restricted_product(self.full, self.dofs, X)
 
     def matrix(self) -> sp.bsr_matrix:
         if self.formed is None:
@@ -412,8 +427,7 @@ def factorize(A, method: str = "auto", near_null: np.ndarray | None = None, prec
             f"unknown linear solver '{method}': choose auto or one of {', '.join(METHODS)}")
     # PARDISO takes the assembly's 3×3 blocks as they are, or a Restriction of them; the other
     # methods convert them
-    taken = isinstance(A, Restriction) or sp.issparse(A) and A.format in ("csr", "bsr")
-    A = A if taken else sp.csr_matrix(A)
+    A = A if isinstance(A, Restriction) else compressed(A)
     installed = available()
     if method != "auto":
         require(method in installed, f"linear solver '{method}' is not installed here "
