@@ -151,10 +151,13 @@ def prepare(case: Case, cache_dir: str | PathLike = DEFAULT_CACHE_DIR, keep_asse
     meshed = time.perf_counter()
     materials, axis = case.materials.to_fe(), np.asarray(femur.frame.up, float)
     assemble = partial(fe.assemble, femur.mesh, materials, order=case.mesh.order, long_axis=axis)
-    system = kept_answer(Path(cache_dir) / "answers", "assembly", (femur.mesh, materials, case.mesh.order, axis),
-                         assemble, mark_kept=_read_back, worth_keeping=_small_enough) if keep_assembly else assemble()
     if keep_assembly:
-        _prune_kept_assemblies(Path(cache_dir) / "answers")
+        answers = Path(cache_dir) / "answers"
+        system = kept_answer(answers, "assembly", (femur.mesh, materials, case.mesh.order, axis), assemble,
+                             mark_kept=_read_back, worth_keeping=_small_enough)
+        _prune_kept_assemblies(answers)
+    else:
+        system = assemble()
     patch = fe.drill_patch(system, femur.site, radius_mm=case.drill.diameter_mm / 2)
     channels = study_channels(system, patch, femur, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
     return GlobalModel(case, femur, system, patch, channels, meshed - start, time.perf_counter() - meshed)

@@ -78,8 +78,9 @@ def write_views(folder: Path, model, step, times) -> tuple[tuple[str, ...], tupl
     return pictures, written_fields
 
 
-def pictured(model, step, plots: tuple[str, ...], views: tuple[tuple[str, ...], tuple[str, ...]]) -> Figures:
-    """What :func:`write_plots` and :func:`write_views` wrote, with the pictures' warp factor."""
+def pictured(model, step, plots: tuple[str, ...], views: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())) -> Figures:
+    """What :func:`write_plots` and :func:`write_views` (when it ran) wrote, with the pictures'
+    warp factor."""
     pictures, written_fields = views
     return Figures(warp_factor(model.femur, step.dynamic), plots + pictures, written_fields)
 

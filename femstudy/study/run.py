@@ -109,10 +109,10 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
     cache_dir = Path(cache_dir)
     if mesh_size_mm is not None:  # so that summary.json echoes the size actually used
         case = with_overrides(case, {"mesh.size_mm": mesh_size_mm}, what="--mesh-size")
-    feasibility.check(case, surface_file(femur_spec(case), cache_dir), available_memory_bytes(), force=force,
-                      cache_dir=cache_dir)
+    surface = surface_file(femur_spec(case), cache_dir)
+    feasibility.check(case, surface, available_memory_bytes(), force=force, cache_dir=cache_dir)
     out_of_range = plausibility.check_inputs(case, bones_dir, force)
-    feasibility.keep_surface_size(surface_file(femur_spec(case), cache_dir), cache_dir)
+    feasibility.keep_surface_size(surface, cache_dir)
     log.info("case '%s': building or loading the femur mesh", case.name)
     checked = time.perf_counter()
     model = prepare(case, cache_dir, keep_assembly=keep_solutions)
@@ -177,9 +177,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                                                   sensitivity.uncertainties(analysis),
                                                   -1 if hole is None else len(hole.stations) - 1, runs.shared_seconds,
                                                   runs.kept)
-        written = [part.result() for part in file_parts]
-        figures = output.pictured(model, step, written[0], written[1] if len(written) > 1 else ((), ())) \
-            if written else None
+        figures = output.pictured(model, step, *(part.result() for part in file_parts)) if file_parts else None
         waited = time.perf_counter()
         solver_record = SolverRecord(model.system.order, model.system.n_dofs, fs.method,
                                      fs.factor.factorisations + dynamics.refactorisations, fs.factor.served,
