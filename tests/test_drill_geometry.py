@@ -37,6 +37,7 @@ def test_wall_length_derived_from_appendix_b_and_the_bovine_power_law():
     ({"point_angle_deg": 0}, "point angle"),
     ({"point_angle_deg": 180}, "point angle"),
     ({"point_angle_deg": -5}, "point angle"),
+    ({"point_angle_deg": 5e-324}, "infinitely long"),   # its radians underflow: tan(β/2) = 0
     ({"diameter_mm": 0}, "diameter"),
     ({"wall_mm": -1}, "wall_mm"),
 ])

@@ -52,6 +52,10 @@ class Drill:
         require(math.isfinite(self.point_angle_deg) and 0 < self.point_angle_deg < 180,
                 f"drill point angle must lie strictly between 0 and 180 degrees, "
                 f"got {self.point_angle_deg}")
+        tangent = math.tan(self.half_angle_rad)  # 0 for an angle whose radians underflow
+        require(tangent > 0 and math.isfinite(self.radius_mm / tangent),
+                f"drill point angle {self.point_angle_deg} degrees is too small: its tip cone would be "
+                f"infinitely long")
         for name in ("face_mm", "heel_mm", "root_mm", "wall_mm", "flute_area_mm2"):
             value = getattr(self, name)
             require(math.isfinite(value) and value > 0,
