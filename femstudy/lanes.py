@@ -30,8 +30,10 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import time
 import traceback
+from functools import partial
 from typing import Callable
 
 
@@ -76,29 +78,49 @@ def describe_exit(code: int | None) -> str:
 class Lane:
     """One function's result, computed in a child process or, failing that, on demand.
 
-    seconds : the function's wall time [s] once the result is in (NaN before)
+    seconds : the function's wall time [s] once the result is in (NaN before; for a lane
+              given its input, from when the input arrived)
     forked : whether a child computes it
     exitcode : the child's exit status once it ended (negative: the signal that ended it)
+
+    ``given``: the function takes one argument, sent later by :meth:`give`; ``warm`` (forked
+    lanes only) runs in the child before it waits for it.
     """
 
-    def __init__(self, name: str, fn: Callable, threads: int | None):
+    def __init__(self, name: str, fn: Callable, threads: int | None, given: bool = False,
+                 warm: Callable[[], object] | None = None):
         self.name, self._fn, self._value, self._done = name, fn, None, False
         self.seconds = float("nan")
         self.exitcode = None
-        self._process = self._receive = None
+        self._process = self._receive = self._input = self._sender = None
         if threads is not None:
             context = multiprocessing.get_context("fork")
             receive, send = context.Pipe(duplex=False)
-            process = context.Process(target=_child, args=(fn, send, threads, os.getpid()),
+            take, give = context.Pipe(duplex=False) if given else (None, None)
+            process = context.Process(target=_child, args=(fn, send, threads, os.getpid(), take, warm),
                                       name=f"femstudy {name}", daemon=True)
             try:
                 process.start()
             except OSError:  # no memory or process left to fork: the caller runs it
                 receive.close()
+                if give is not None:
+                    give.close()
                 return
             finally:
                 send.close()  # the child holds the only sending end: its exit ends the pipe
-            self._process, self._receive = process, receive
+                if take is not None:
+                    take.close()
+            self._process, self._receive, self._input = process, receive, give
+
+    def give(self, value) -> None:
+        """The input of a lane started by :meth:`Lanes.start_given`: sent to its child from a
+        thread (the child may still be warming up), or kept for the caller to run with."""
+        if self._input is None:
+            self._fn = partial(self._fn, value)
+            return
+        self._sender = threading.Thread(target=_send_quietly, args=(self._input, value),
+                                        name=f"femstudy {self.name} input", daemon=True)
+        self._sender.start()
 
     @property
     def forked(self) -> bool:
@@ -131,7 +153,7 @@ class Lane:
         return value, seconds
 
     def close(self) -> None:
-        """End the child if it still runs, wait for it and release its pipe and handles."""
+        """End the child if it still runs, wait for it and release its pipes and handles."""
         if self._process is None or self.exitcode is not None:
             return
         try:
@@ -141,6 +163,10 @@ class Lane:
             self.exitcode = self._process.exitcode
         finally:
             self._receive.close()
+            if self._sender is not None:
+                self._sender.join()  # the child has ended: its input pipe no longer blocks
+            if self._input is not None:
+                self._input.close()
             with contextlib.suppress(ValueError):  # still running after a second interrupt
                 self._process.close()
 
@@ -177,6 +203,14 @@ class Lanes:
         self._lanes.append(lane)
         return lane
 
+    def start_given(self, name: str, fn: Callable, warm: Callable[[], object] | None = None) -> Lane:
+        """Fork a child now that runs ``warm()`` and then ``fn(x)`` once :meth:`Lane.give` sends x;
+        when lanes do not fork, ``fn(x)`` runs on :meth:`Lane.result` (``warm`` is skipped: it
+        only readies a child)."""
+        lane = Lane(name, fn, self.threads if self.forking else None, given=True, warm=warm)
+        self._lanes.append(lane)
+        return lane
+
     def __exit__(self, *exc) -> None:
         with contextlib.ExitStack() as stack:  # every lane closed and the limits restored, whatever fails
             if self._limits is not None:
@@ -186,9 +220,16 @@ class Lanes:
         self._limits = None
 
 
-def _child(fn: Callable, send, threads: int, parent: int) -> None:
-    """A child's whole life: signals set up, threads limited, ``fn`` run, (status, value,
-    seconds, traceback) sent."""
+def _send_quietly(connection, value) -> None:
+    """Send ``value`` down ``connection``; a child that has ended (after an error of its own,
+    which its result pipe carries) no longer reads it."""
+    with contextlib.suppress(OSError):
+        connection.send(value)
+
+
+def _child(fn: Callable, send, threads: int, parent: int, given=None, warm: Callable[[], object] | None = None) -> None:
+    """A child's whole life: signals set up, threads limited, ``warm`` run and the input
+    awaited (a lane given its input later), ``fn`` run, (status, value, seconds, traceback) sent."""
     from threadpoolctl import threadpool_limits
 
     start = time.perf_counter()
@@ -197,6 +238,14 @@ def _child(fn: Callable, send, threads: int, parent: int) -> None:
     _end_with_parent(parent)
     try:
         threadpool_limits(limits=threads)
+        if given is not None:
+            if warm is not None:
+                warm()
+            try:
+                fn = partial(fn, given.recv())
+            except EOFError:  # the caller closed the lane without giving its input: nothing to do
+                return
+            start = time.perf_counter()
         message = ("ok", fn(), time.perf_counter() - start, "")
     except SystemExit:  # terminated: the caller no longer waits for a result
         raise

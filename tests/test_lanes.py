@@ -161,3 +161,42 @@ def test_a_child_leaves_the_consoles_progress_bars_to_its_parent():
         bars, _ = in_child.result()
     assert bars == {} and "transient steps" in handler.bars  # dropped there, kept here
     handler._close_bars()
+
+
+@pytest.mark.parametrize("parallel", [True, False])
+def test_a_lane_started_before_its_input_warms_up_then_runs_on_what_it_is_given(parallel):
+    """The child runs ``warm`` at once (here it records its pid in a module global, which the
+    child then sees and the caller does not), then waits for give(); without forking, fn runs in
+    the caller on result() and warm is skipped."""
+    data = np.arange(2_000_000.0)  # 16 MB: more than a pipe holds, sent while the child may still warm
+    with Lanes(parallel) as lanes:
+        lane = lanes.start_given("weigh", lambda x: (os.getpid(), WARMED.get("pid"), float(x @ x)),
+                                 warm=lambda: WARMED.update(pid=os.getpid()))
+        lane.give(data)
+        pid, warmed, value = lane.result()
+    assert value == pytest.approx(float(data @ data))
+    assert "pid" not in WARMED  # warm ran in the child only, if anywhere
+    assert warmed == (pid if lane.forked else None) and (pid != os.getpid()) == lane.forked
+    assert lane.seconds >= 0
+
+
+WARMED: dict = {}
+
+
+@forking
+def test_a_lane_never_given_its_input_ends_with_the_block():
+    with Lanes() as lanes:
+        lane = lanes.start_given("waits", lambda x: x)
+    assert lane.exitcode is not None  # ended and reaped, not left waiting
+
+
+@forking
+def test_an_error_while_warming_up_is_raised_in_the_caller():
+    def no_library():
+        raise ImportError("no module named 'pyvista'")
+
+    with Lanes() as lanes:
+        lane = lanes.start_given("picture", lambda x: x, warm=no_library)
+        lane.give(np.zeros(3_000_000))  # the child has ended: the input goes nowhere, quietly
+        with pytest.raises(ImportError, match="pyvista"):
+            lane.result()

@@ -89,17 +89,21 @@ def quadrature_points(system, cells: np.ndarray | None = None) -> np.ndarray:
 
 
 def nodal_average(system, values_at_points: np.ndarray) -> np.ndarray:
-    """A quadrature-point field (n_tets, nq) projected onto the mesh vertices for display: the
-    lumped L2 projection σ_i = Σ_e Σ_q dV_q N_i(x_q) σ_q / Σ_e Σ_q dV_q N_i(x_q). It averages
-    across material interfaces; use the quadrature-point values for maxima."""
+    """A quadrature-point field (n_tets, nq), or several (n_tets, nq, k), projected onto the mesh
+    vertices for display: the lumped L2 projection σ_i = Σ_e Σ_q dV_q N_i(x_q) σ_q /
+    Σ_e Σ_q dV_q N_i(x_q); (n_vertices,) or (n_vertices, k). It averages across material
+    interfaces; use the quadrature-point values for maxima."""
     N = _barycentric_at_quadrature(system)
     _, det = jacobians(system.mesh.p.T, system.mesh.t.T)
     dV = np.abs(det)[:, None] * system.ref.weights
-    t = system.mesh.t.T
-    numerator = np.bincount(t.ravel(), np.einsum("eq,qk,eq->ek", dV, N, values_at_points).ravel(),
-                            minlength=system.mesh.nvertices)
-    denominator = np.bincount(t.ravel(), np.einsum("eq,qk->ek", dV, N).ravel(), minlength=system.mesh.nvertices)
-    return numerator / denominator
+    t = system.mesh.t.T.ravel()
+    values = np.asarray(values_at_points, float)
+    columns = values.reshape(values.shape[:2] + (-1,))
+    denominator = np.bincount(t, np.einsum("eq,qk->ek", dV, N).ravel(), minlength=system.mesh.nvertices)
+    out = np.column_stack([np.bincount(t, np.einsum("eq,qk,eq->ek", dV, N, columns[:, :, j]).ravel(),
+                                       minlength=system.mesh.nvertices) for j in range(columns.shape[2])])
+    out /= denominator[:, None]
+    return out.reshape((-1,) + values.shape[2:])
 
 
 def von_mises_nodal(system, u: np.ndarray) -> np.ndarray:

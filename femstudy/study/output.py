@@ -8,6 +8,7 @@ executor the study was given (:mod:`femstudy.execution`; side by side when it fo
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -20,9 +21,10 @@ from femstudy.study.study_result import Figures
 
 
 def _von_mises_vertices(system, vm_rows: np.ndarray, coordinates: np.ndarray) -> np.ndarray:
-    """Vertex von Mises [MPa] of the field basis @ coordinates, from the projected stress rows."""
+    """Vertex von Mises [MPa] of the fields basis @ coordinates (m, k), one column each, from the
+    projected stress rows (one pass over them for all k)."""
     vm = np.linalg.norm(vm_rows @ coordinates, axis=1)
-    return nodal_average(system, vm.reshape(system.n_tets, -1))
+    return nodal_average(system, vm.reshape(system.n_tets, -1, coordinates.shape[1]))
 
 
 def warp_factor(model, dynamic) -> float:
@@ -56,26 +58,44 @@ def write_views(folder: Path, model, step, times) -> tuple[tuple[str, ...], tupl
     if not (picture or case.output.fields):
         return (), ()
     base = fields.grid(system.nodes, system.cells, system.region, femur.frame.up)
+    peak_step = int(np.searchsorted(times, dynamic.peak("max_deflection_mm").time_s))
+    pictured_step = min(kept, key=lambda k: abs(k - peak_step)) if picture else None
+    steps = sorted(k for k in kept if k % case.output.fields_every == 0 or k == len(times) - 1) \
+        if case.output.fields else []
+    # every drawn field's vertex von Mises at once: "static" and the steps
+    drawn = {"static": step.static_u} if case.output.fields else {}
+    drawn.update({k: kept[k] for k in steps + ([pictured_step] if picture else [])})
+    vm = _von_mises_vertices(system, step.von_mises_rows, step.basis.T @ np.column_stack(list(drawn.values())))
 
-    def with_solution(u):
-        return fields.with_solution(base, u, _von_mises_vertices(system, step.von_mises_rows, step.basis.T @ u),
-                                    system.cells)
+    def with_solution(key):
+        return fields.with_solution(base, drawn[key], vm[:, list(drawn).index(key)], system.cells)
 
     pictures = ()
     if picture:
-        peak_step = int(np.searchsorted(times, dynamic.peak("max_deflection_mm").time_s))
-        n = min(kept, key=lambda k: abs(k - peak_step))
-        render.deformed_picture(folder / "femur.png", with_solution(kept[n]), femur.site.entry_point,
+        render.deformed_picture(folder / "femur.png", with_solution(pictured_step), femur.site.entry_point,
                                 femur.site.direction, warp_factor(femur, dynamic),
-                                f"{case.name}: dynamic loading, t = {times[n]:.2f} s")
+                                f"{case.name}: dynamic loading, t = {times[pictured_step]:.2f} s")
         pictures = ("femur.png",)
     written_fields = ()
     if case.output.fields:
-        steps = sorted(k for k in kept if k % case.output.fields_every == 0 or k == len(times) - 1)
-        fields.write_series(folder / "fields", "dynamic", [(float(times[k]), with_solution(kept[k])) for k in steps])
-        fields.write_series(folder / "fields", "static", [(0.0, with_solution(step.static_u))])
+        fields.write_series(folder / "fields", "dynamic", [(float(times[k]), with_solution(k)) for k in steps])
+        fields.write_series(folder / "fields", "static", [(0.0, with_solution("static"))])
         written_fields = ("fields/dynamic.pvd", "fields/static.pvd")
     return pictures, written_fields
+
+
+def start_file_parts(executor, folder: Path, model, times) -> tuple:
+    """Start :func:`write_plots` and (when the case asks for a picture or fields)
+    :func:`write_views` on ``executor`` (:mod:`femstudy.execution`) before the step they draw
+    exists: each is given it later (``give(step)``), and a forking executor meanwhile imports
+    the part's plotting library in its process (matplotlib, pyvista)."""
+    from femstudy.plotting import pyplot
+
+    parts = (executor.start_given("figures", partial(write_plots, folder, model), warm=pyplot),)
+    if model.case.output.screenshot or model.case.output.fields:
+        parts += (executor.start_given("picture and fields", partial(write_views, folder, model, times=times),
+                                       warm=render.start_offscreen),)
+    return parts
 
 
 def pictured(model, step, plots: tuple[str, ...], views: tuple[tuple[str, ...], tuple[str, ...]] = ((), ())) -> Figures:

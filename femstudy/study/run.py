@@ -154,15 +154,15 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
                 kept_answer, answers, "sensitivity", key, partial(
                     sensitivity.run_variants, case, model, loading, unit_fields, solver, solutions, cache_dir,
                     case.loads.application == "hole", bool(case.analysis.modes)), sensitivity.Variants.read_back))
+        # the file parts start now, to import their plotting libraries while the step is computed
+        # (on a core the march leaves idle when they fork), and are given the step when it is
+        file_parts = () if folder is None else output.start_file_parts(executor, folder, model, loading.times_s)
         step = _thesis_step(case, fs, model, loading, shapes)
         marched = time.perf_counter()
-        file_parts = ()
-        if folder is not None:
+        if file_parts:
             log.info("writing results to %s", out_dir)
-            file_parts = (executor.start("figures", partial(output.write_plots, folder, model, step)),)
-            if case.output.screenshot or case.output.fields:
-                file_parts += (executor.start("picture and fields", partial(output.write_views, folder, model, step,
-                                                                            loading.times_s)),)
+        for part in file_parts:
+            part.give(step)
         dynamics, modal_done = _modes_and_resolved(case, loading, fs, model, shapes, step, answers, key)
         baseline = sensitivity.baseline_answers(fs, model, loading, dynamics.frequencies_Hz[0]
                                                 if dynamics.frequencies_Hz else None) if sensitivity_part else None
