@@ -19,6 +19,7 @@ import numpy as np
 from femstudy.errors import UserError
 from femstudy.femur_mesh import CORTICAL, Clamps, DrillSite, TetMesh
 from femstudy.meshing.frame import Frame
+from femstudy.meshing.ray_cells import cells_along
 
 
 def _faces(tets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -165,11 +166,8 @@ def drill_site(mesh: TetMesh, frame: Frame, faces_outer: np.ndarray, site, centr
 
 def cortical_depth(mesh: TetMesh, entry, direction, step_mm: float = 0.02, max_mm: float = 60.0) -> float:
     """Distance from ``entry`` along ``direction`` to where the ray first leaves cortical tets [mm]."""
-    import pyvista as pv
-
-    grid = pv.UnstructuredGrid({10: mesh.tets}, mesh.points)
     s = np.arange(step_mm / 2, max_mm, step_mm)
-    cells = grid.find_containing_cell(entry + np.outer(s, direction))
+    cells = cells_along(mesh, entry, direction, s)
     cortical = (cells >= 0) & (mesh.region[np.maximum(cells, 0)] == CORTICAL)
     first = np.argmax(cortical)  # the entry lies on the surface: skip samples that round outside
     if not cortical[first]:

@@ -22,6 +22,7 @@ import numpy as np
 from femstudy.errors import UserError
 from femstudy.femur_mesh import DrillSite, TetMesh
 from femstudy.meshing.frame import Frame
+from femstudy.meshing.ray_cells import cells_along
 from femstudy.meshing.regions import point_triangle_distance, thickness
 
 #: Step along a ray between the samples of the cortex rule [mm] (then refined by bisection).
@@ -203,8 +204,6 @@ def drill_site_on(surface: SiteSurface, site, side: np.ndarray, centre: np.ndarr
     drill axis across the long axis; the cortex crossed along it by the cortex rule; and what
     lies :data:`BEYOND_PROBE_MM` past the cortex on the axis in the tet ``mesh``: "cancellous"
     bone, or the "canal" (no bone)."""
-    import pyvista as pv
-
     up = surface.frame.up
     start = centre + side * surface.frame.length_mm
     t = float(surface.entry(start, -side)[0])
@@ -225,6 +224,5 @@ def drill_site_on(surface: SiteSurface, site, side: np.ndarray, centre: np.ndarr
     cortex = float(surface.cortex_crossing(entry, direction, 60.0)[0])
     cortex = cortex if np.isfinite(cortex) else 60.0
     probe = entry + (cortex + BEYOND_PROBE_MM) * direction
-    grid = pv.UnstructuredGrid({pv.CellType.TETRA: mesh.tets}, mesh.points)
-    inside = int(np.asarray(grid.find_containing_cell(probe[None])).reshape(-1)[0]) >= 0
+    inside = bool(cells_along(mesh, probe, direction, [0.0])[0] >= 0)
     return DrillSite(site.name, entry, normal, direction, round(cortex, 3), "cancellous" if inside else "canal")

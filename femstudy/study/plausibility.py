@@ -38,6 +38,7 @@ import numpy as np
 
 from femstudy import thesis
 from femstudy.errors import UserError
+from femstudy.meshing.ray_cells import cells_along
 
 log = logging.getLogger(__name__)
 
@@ -126,11 +127,8 @@ def load_findings(loading) -> list[Finding]:
 def bone_along_axis_mm(mesh, entry, direction, max_mm: float, step_mm: float = 0.05) -> float:
     """Length of the first stretch of bone (tets of any region) along the ray from ``entry``
     in ``direction`` [mm], sampled every ``step_mm`` up to ``max_mm``."""
-    import pyvista as pv
-
-    grid = pv.UnstructuredGrid({10: mesh.tets}, mesh.points)
     s = np.arange(step_mm / 2, max_mm, step_mm)
-    inside = grid.find_containing_cell(np.asarray(entry) + np.outer(s, direction)) >= 0
+    inside = cells_along(mesh, entry, direction, s) >= 0
     first = int(np.argmax(inside))  # the entry lies on the surface: skip samples that round outside
     if not inside[first]:
         return 0.0
