@@ -199,3 +199,25 @@ def test_modes_are_kept_beside_the_solutions_and_checked_before_use(tmp_path, ca
     moved = solve_modal(factorize(heavier, clamped_both_ends(heavier), "superlu", keep=tmp_path), k=4)
     assert not moved.kept and len(list(tmp_path.glob("*-modes4-*.npz"))) == 2
     assert moved.frequency_Hz[0] < 0.9 * plain.frequency_Hz[0]
+
+
+def test_a_store_reads_back_what_was_stored_compressed_or_not_and_a_truncated_one_is_refused(tmp_path, caplog):
+    """read_store reads np.savez's uncompressed members straight from the file; it reads what
+    np.load reads, compressed members too, and a store cut short is unreadable, not wrong."""
+    from femstudy.fe.kept import read_store, write_store
+
+    rng = np.random.default_rng(5)
+    arrays = {"U": np.asfortranarray(rng.standard_normal((300, 7))), "e": rng.random(7),
+              "method": np.array("pardiso"), "ids": np.arange(12, dtype=np.int32).reshape(3, 4)}
+    stored, packed = tmp_path / "stored.npz", tmp_path / "packed.npz"
+    assert write_store(stored, "test", **arrays)
+    np.savez_compressed(packed, **arrays)
+    for path in (stored, packed):
+        back = read_store(path, list(arrays), "test")
+        with np.load(path) as reference:
+            for name, value in arrays.items():
+                assert back[name].dtype == value.dtype and np.array_equal(back[name], reference[name])
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(stored.read_bytes()[: stored.stat().st_size // 2])
+    assert read_store(truncated, list(arrays), "test") is None
+    assert "ignoring unreadable kept test" in caplog.text

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import struct
 import zipfile
 from pathlib import Path
 from typing import Callable
@@ -68,15 +69,35 @@ def fingerprint(A: sp.csr_matrix | sp.bsr_matrix) -> str:
 
 def read_store(path: Path, names, what: str) -> dict | None:
     """The arrays ``names`` of the store at ``path``; None when there is none or it cannot be
-    read (logged: a damaged store costs a recomputation, never the run)."""
+    read (logged: a damaged store costs a recomputation, never the run). Every reader checks
+    what it reads against its model before using it."""
     if not path.is_file():
         return None
     try:
-        with np.load(path) as stored:
-            return {name: stored[name] for name in names}
+        with zipfile.ZipFile(path) as store, open(path, "rb") as raw:
+            return {name: _member(store, raw, f"{name}.npy") for name in names}
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
         log.warning("ignoring unreadable kept %s %s (%s)", what, path, exc)
         return None
+
+
+def _member(store: zipfile.ZipFile, raw, name: str) -> np.ndarray:
+    """One array of an ``np.savez`` file. Its members are stored uncompressed: the array is read
+    straight from the file at the member's data (its local header is 30 bytes, then the name
+    and an extra field), one copy from the page cache. Through ``np.load`` the zip module reads
+    it in 256 kB pieces, checksummed and copied twice: 0.16–0.46 s against 0.07 s for the
+    default study's 205 MB of kept solutions, in a fresh process."""
+    info = store.getinfo(name)
+    if info.compress_type != zipfile.ZIP_STORED:
+        with store.open(info) as member:
+            return np.lib.format.read_array(member, allow_pickle=False)
+    raw.seek(info.header_offset)
+    header = raw.read(30)
+    if header[:4] != b"PK\x03\x04":
+        raise zipfile.BadZipFile(f"no local header for {name}")
+    name_length, extra_length = struct.unpack("<HH", header[26:30])
+    raw.seek(info.header_offset + 30 + name_length + extra_length)
+    return np.lib.format.read_array(raw, allow_pickle=False)
 
 
 def write_store(path: Path, what: str, **arrays) -> bool:
