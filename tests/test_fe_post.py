@@ -97,3 +97,18 @@ def test_long_histories_are_sampled_but_their_peaks_are_exact(drilled, monkeypat
     recorder = StepRecorder(channels, 1)
     recorder.step(0, basis @ coordinates[:, every["von_mises"].peak_step])
     assert recorder.history()["von_mises"].peak == pytest.approx(every["von_mises"].peak, rel=1e-12)
+
+
+def test_the_vertex_von_mises_of_many_fields_at_once_are_each_fields_own():
+    """The views' vertex von Mises of k fields (several passes of a few fields over the projected
+    stress rows) equal von_mises_nodal of each field alone, to round-off."""
+    from femstudy.study.output import FIELDS_PER_PASS, _von_mises_vertices
+
+    system = tube(1, 12, 12, 2)
+    rng = np.random.default_rng(4)
+    basis = 1e-3 * rng.standard_normal((3 * len(system.nodes), 4))
+    coordinates = rng.standard_normal((4, FIELDS_PER_PASS + 3))   # two passes, the second short
+    rows = von_mises_channel(system).project(basis)   # the study's von Mises rows of the basis
+    together = _von_mises_vertices(system, rows, coordinates)
+    alone = np.column_stack([von_mises_nodal(system, basis @ c) for c in coordinates.T])
+    np.testing.assert_allclose(together, alone, rtol=1e-10, atol=1e-12 * alone.max())

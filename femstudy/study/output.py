@@ -20,11 +20,20 @@ from femstudy.study.results import timeseries_csv
 from femstudy.study.study_result import Figures
 
 
+#: Fields whose vertex von Mises come from one pass over the projected stress rows (the pass's
+#: product holds rows × components × this many values: 50 MB at 8 mm).
+FIELDS_PER_PASS = 8
+
+
 def _von_mises_vertices(system, vm_rows: np.ndarray, coordinates: np.ndarray) -> np.ndarray:
     """Vertex von Mises [MPa] of the fields basis @ coordinates (m, k), one column each, from the
-    projected stress rows (one pass over them for all k)."""
-    vm = np.linalg.norm(vm_rows @ coordinates, axis=1)
-    return nodal_average(system, vm.reshape(system.n_tets, -1, coordinates.shape[1]))
+    projected stress rows, :data:`FIELDS_PER_PASS` fields per pass over them."""
+    passes = []
+    for start in range(0, coordinates.shape[1], FIELDS_PER_PASS):
+        chunk = coordinates[:, start:start + FIELDS_PER_PASS]
+        vm = np.linalg.norm(vm_rows @ chunk, axis=1)
+        passes.append(nodal_average(system, vm.reshape(system.n_tets, -1, chunk.shape[1])))
+    return np.hstack(passes)
 
 
 def warp_factor(model, dynamic) -> float:
