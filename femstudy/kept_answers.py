@@ -1,5 +1,6 @@
 """Answers kept between runs: a study repeated with the same inputs reads its hole models'
-verification and its sensitivity table instead of computing them again.
+verification, its sensitivity table, its thesis step, its resolved run and its assembled model
+instead of computing them again.
 
 Each of these is a deterministic function of its inputs (the femur's mesh, surfaces and site,
 the global unit fields, the case's loads and options) and of the code that computes it. It is
@@ -135,3 +136,17 @@ def kept_answer(folder: Path | None, what: str, parts: tuple, compute: Callable[
     except (OSError, pickle.PicklingError) as exc:
         log.warning("could not keep the %s in %s (%s)", what, folder, exc)
     return answer
+
+
+def prune(folder: Path, what: str, keep: int) -> None:
+    """Keep only the newest ``keep`` kept answers of kind ``what`` in ``folder`` (large ones,
+    whose every code change keys a new file); another process may be removing the same ones."""
+    def modified(path: Path) -> float:
+        try:
+            return path.stat().st_mtime
+        except FileNotFoundError:
+            return 0.0
+
+    kept = sorted(Path(folder).glob(f"{what.replace(' ', '-')}-*.pickle"), key=modified)
+    for path in kept[:-keep]:
+        path.unlink(missing_ok=True)

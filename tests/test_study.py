@@ -207,15 +207,19 @@ def test_a_repeated_study_factorises_nothing_and_gives_the_same_maxima(tmp_path,
 
 
 def test_a_study_repeated_with_the_same_inputs_reads_its_answers_back(tmp_path, mesh_cache):
-    """femstudy.kept_answers: the hole models with their verification and the resolved run of a
-    study repeated unchanged are read, not computed, and say so, with every number the first
-    run's; a changed load (here its scale) changes their key and they are computed again."""
+    """femstudy.kept_answers: the hole models with their verification, the thesis step's march
+    and outputs and the resolved run of a study repeated unchanged are read, not computed, and
+    say so, with every number the first run's; a changed load (here its scale) changes their key
+    and they are computed again."""
     common = dict(order=2, step=0.5, screenshot="false", fields="false", resolved="true", application="hole")
     first, _ = run(tmp_path, mesh_cache, scale=3.0, name="first", **common)
     same, out = run(tmp_path, mesh_cache, scale=3.0, name="same", **common)
     other, _ = run(tmp_path, mesh_cache, scale=3.5, name="other", **common)
-    assert (same["hole"]["verification"]["kept_from_earlier_run"], same["dynamics"]["resolved_kept"]) == (True, True)
-    assert not other["hole"]["verification"]["kept_from_earlier_run"] and not other["dynamics"]["resolved_kept"]
+    assert (same["hole"]["verification"]["kept_from_earlier_run"], same["dynamics"]["resolved_kept"],
+            same["dynamics"]["step_kept"]) == (True, True, True)
+    assert not (other["hole"]["verification"]["kept_from_earlier_run"] or other["dynamics"]["resolved_kept"]
+                or other["dynamics"]["step_kept"] or first["dynamics"]["step_kept"])
+    assert same["results"] == first["results"]  # the thesis step read back: every series and peak the first's
     assert same["solver"]["factorisations"] == 0 and same["timings"]["hole_s"] < first["timings"]["hole_s"]
     assert same["hole"] == {**first["hole"], "verification": {**first["hole"]["verification"],
                                                              "kept_from_earlier_run": True}}
@@ -249,14 +253,15 @@ def test_a_kept_assembly_is_the_assembly(tmp_path, mesh_cache):
 
 
 def test_only_the_newest_kept_assemblies_stay(tmp_path):
-    from femstudy.study.global_model import KEPT_ASSEMBLIES, _prune_kept_assemblies
+    from femstudy.kept_answers import prune
+    from femstudy.study.global_model import KEPT_ASSEMBLIES
 
     for age in range(KEPT_ASSEMBLIES + 2):
         path = tmp_path / f"assembly-{age}.pickle"
         path.write_bytes(b"")
         os.utime(path, (1000.0 - age, 1000.0 - age))
     (tmp_path / "hole-models-0.pickle").write_bytes(b"")
-    _prune_kept_assemblies(tmp_path)
+    prune(tmp_path, "assembly", KEPT_ASSEMBLIES)
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         [f"assembly-{age}.pickle" for age in range(KEPT_ASSEMBLIES)] + ["hole-models-0.pickle"])
 

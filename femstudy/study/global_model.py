@@ -21,7 +21,7 @@ import numpy as np
 from femstudy import fe
 from femstudy.casefile import Case
 from femstudy.femur_mesh import REGION_NAMES
-from femstudy.kept_answers import kept_answer
+from femstudy.kept_answers import kept_answer, prune
 from femstudy.meshing import FemurModel
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.study.femur import femur_model
@@ -104,20 +104,6 @@ def _read_back(system: fe.FESystem) -> fe.FESystem:
     return replace(system, timings={"kept_from_earlier_run": True})
 
 
-def _prune_kept_assemblies(folder: Path) -> None:
-    """Keep the newest :data:`KEPT_ASSEMBLIES` kept assemblies (0.14 GB each for the default
-    femur); another process may be removing the same ones."""
-    def modified(path: Path) -> float:
-        try:
-            return path.stat().st_mtime
-        except FileNotFoundError:
-            return 0.0
-
-    kept = sorted(folder.glob("assembly-*.pickle"), key=modified)
-    for path in kept[:-KEPT_ASSEMBLIES]:
-        path.unlink(missing_ok=True)
-
-
 def _small_enough(system: fe.FESystem) -> bool:
     matrices = (system.K_blocks.data, system.K_blocks.indices, system.M_nodes.data, system.M_nodes.indices)
     return sum(a.nbytes for a in matrices) <= MAX_KEPT_ASSEMBLY_BYTES
@@ -155,7 +141,7 @@ def prepare(case: Case, cache_dir: str | PathLike = DEFAULT_CACHE_DIR, keep_asse
         answers = Path(cache_dir) / "answers"
         system = kept_answer(answers, "assembly", (femur.mesh, materials, case.mesh.order, axis), assemble,
                              mark_kept=_read_back, worth_keeping=_small_enough)
-        _prune_kept_assemblies(answers)
+        prune(answers, "assembly", KEPT_ASSEMBLIES)
     else:
         system = assemble()
     patch = fe.drill_patch(system, femur.site, radius_mm=case.drill.diameter_mm / 2)

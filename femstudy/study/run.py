@@ -38,7 +38,7 @@ from femstudy import atomic, fe
 from femstudy.casefile import Case, with_overrides
 from femstudy.execution import Executor, InProcess
 from femstudy.fe.linsolve import available_memory_bytes
-from femstudy.kept_answers import kept_answer
+from femstudy.kept_answers import kept_answer, prune
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.meshing.model import surface_file
 from femstudy.study import feasibility, mesh_convergence, output, plausibility, sensitivity
@@ -157,7 +157,11 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         # the file parts start now, to import their plotting libraries while the step is computed
         # (on a core the march leaves idle when they fork), and are given the step when it is
         file_parts = () if folder is None else output.start_file_parts(executor, folder, model, loading.times_s)
-        step = _thesis_step(case, fs, model, loading, shapes)
+        # the march and its outputs, a function of what key holds, read back when an earlier run kept them
+        step = kept_answer(answers, "thesis step", key, partial(_thesis_step, case, fs, model, loading, shapes),
+                           lambda kept: replace(kept, kept=True), _worth_keeping)
+        if answers is not None:
+            prune(answers, "thesis step", KEPT_STEPS)
         marched = time.perf_counter()
         if file_parts:
             log.info("writing results to %s", out_dir)
@@ -231,6 +235,7 @@ class ThesisStep:
     basis : (n_dofs, m) spans every field written; von_mises_rows its von Mises projection
     fields : step index → displacement [mm] of the steps whose field is written or pictured
     static_u : the static loading's displacement [mm]
+    kept : read from an earlier run of the same inputs (femstudy.kept_answers)
     """
 
     scheme: str
@@ -242,6 +247,23 @@ class ThesisStep:
     von_mises_rows: np.ndarray
     fields: dict[int, np.ndarray]
     static_u: np.ndarray
+    kept: bool = False
+
+    @property
+    def nbytes(self) -> int:
+        """What its arrays hold [bytes]."""
+        return (self.basis.nbytes + self.von_mises_rows.nbytes + self.static_u.nbytes
+                + sum(u.nbytes for u in self.fields.values()))
+
+
+#: Thesis steps kept in a cache at most (the newest: every code change keys a new one), and the
+#: largest kept (the default study's is 55 MB: its von Mises rows are most of it).
+KEPT_STEPS = 4
+MAX_KEPT_STEP_BYTES = 2 ** 29
+
+
+def _worth_keeping(step: ThesisStep) -> bool:
+    return step.nbytes <= MAX_KEPT_STEP_BYTES
 
 
 def _damping(case: Case) -> tuple[float, float]:
@@ -313,14 +335,14 @@ def _modes_and_resolved(case: Case, loading: CaseLoading, fs, model: GlobalModel
     """The modal analysis and the resolved transient the case asks for, and the time the modal
     analysis ended (None without one). The resolved run, a function of what ``key`` holds, is
     read from ``answers`` when an earlier run kept it (femstudy.kept_answers)."""
-    dynamics = Dynamics(step.scheme, step.vectors, step.indicator)
+    dynamics = Dynamics(step.scheme, step.vectors, step.indicator, step_kept=step.kept)
     if not case.analysis.modes:
         return dynamics, None
     log.info("modal analysis: lowest %d modes", case.analysis.modes)
     modes = fe.solve_modal(fs, k=case.analysis.modes)
     check = fe.step_check(float(modes.period_s[0]), case.time.step_s)
     dynamics = Dynamics(step.scheme, step.vectors, step.indicator, tuple(float(f) for f in modes.frequency_Hz),
-                        check, modes_kept=modes.kept)
+                        check, modes_kept=modes.kept, step_kept=step.kept)
     modal_done = time.perf_counter()
     if case.analysis.resolved:
         found = kept_answer(answers, "resolved transient", key, partial(_resolved, case, loading, fs, model, shapes,

@@ -43,7 +43,9 @@ def versions() -> dict:
 class Dynamics:
     """How the transients ran and what inertia does.
 
-    scheme, vectors, indicator : the thesis-step march (femstudy.fe.transient)
+    scheme, vectors, indicator : the thesis-step march (femstudy.fe.transient); step_kept: the
+                 march and its outputs were read from an earlier run of the same inputs
+                 (femstudy.kept_answers)
     lowest_period_s, step_check : from the modal analysis; modes_kept: its modes were read back
                  from an earlier analysis of the same model (femstudy.fe.modal)
     resolved_* : the resolved run (step, steps, vectors, indicator, peak deflection and its
@@ -68,6 +70,7 @@ class Dynamics:
     flute_passing_Hz: float | None = None
     modes_kept: bool = False
     resolved_kept: bool = False
+    step_kept: bool = False
 
     @property
     def amplification(self) -> float | None:
