@@ -106,10 +106,11 @@ def code_fingerprint() -> str:
 
 def kept_answer(folder: Path | None, what: str, parts: tuple, compute: Callable[[], T],
                 mark_kept: Callable[[T], T] = lambda answer: answer,
-                worth_keeping: Callable[[T], bool] = lambda answer: True) -> T:
+                worth_keeping: Callable[[T], bool] = lambda answer: True, newest: int | None = None) -> T:
     """``compute()``, or the answer kept in ``folder`` under the digest of ``parts`` (then
     passed through ``mark_kept``, so the result can say it was read); a computed answer is
-    kept there when ``worth_keeping`` says so. ``folder`` None computes without keeping
+    kept there when ``worth_keeping`` says so, and then only the ``newest`` answers of its kind
+    stay (:func:`prune`; all when None). ``folder`` None computes without keeping
     (``--no-kept-solutions``)."""
     if folder is None:
         return compute()
@@ -135,6 +136,8 @@ def kept_answer(folder: Path | None, what: str, parts: tuple, compute: Callable[
             pickle.dump((key, answer), out, protocol=pickle.HIGHEST_PROTOCOL)
     except (OSError, pickle.PicklingError) as exc:
         log.warning("could not keep the %s in %s (%s)", what, folder, exc)
+    if newest is not None:
+        prune(Path(folder), what, newest)
     return answer
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from femstudy import fe
 from femstudy.casefile import Case
 from femstudy.femur_mesh import REGION_NAMES
-from femstudy.kept_answers import kept_answer, prune
+from femstudy.kept_answers import kept_answer
 from femstudy.meshing import FemurModel
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.study.femur import femur_model
@@ -137,13 +137,9 @@ def prepare(case: Case, cache_dir: str | PathLike = DEFAULT_CACHE_DIR, keep_asse
     meshed = time.perf_counter()
     materials, axis = case.materials.to_fe(), np.asarray(femur.frame.up, float)
     assemble = partial(fe.assemble, femur.mesh, materials, order=case.mesh.order, long_axis=axis)
-    if keep_assembly:
-        answers = Path(cache_dir) / "answers"
-        system = kept_answer(answers, "assembly", (femur.mesh, materials, case.mesh.order, axis), assemble,
-                             mark_kept=_read_back, worth_keeping=_small_enough)
-        prune(answers, "assembly", KEPT_ASSEMBLIES)
-    else:
-        system = assemble()
+    system = kept_answer(Path(cache_dir) / "answers", "assembly", (femur.mesh, materials, case.mesh.order, axis),
+                         assemble, mark_kept=_read_back, worth_keeping=_small_enough,
+                         newest=KEPT_ASSEMBLIES) if keep_assembly else assemble()
     patch = fe.drill_patch(system, femur.site, radius_mm=case.drill.diameter_mm / 2)
     channels = study_channels(system, patch, femur, case.analysis.exclusion_radius_mm, case.clamps.length_mm)
     return GlobalModel(case, femur, system, patch, channels, meshed - start, time.perf_counter() - meshed)

@@ -75,9 +75,10 @@ def write_views(folder: Path, model, step, times) -> tuple[tuple[str, ...], tupl
     drawn = {"static": step.static_u} if case.output.fields else {}
     drawn.update({k: kept[k] for k in steps + ([pictured_step] if picture else [])})
     vm = _von_mises_vertices(system, step.von_mises_rows, step.basis.T @ np.column_stack(list(drawn.values())))
+    column = {key: j for j, key in enumerate(drawn)}
 
     def with_solution(key):
-        return fields.with_solution(base, drawn[key], vm[:, list(drawn).index(key)], system.cells)
+        return fields.with_solution(base, drawn[key], vm[:, column[key]], system.cells)
 
     pictures = ()
     if picture:

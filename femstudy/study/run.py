@@ -38,7 +38,7 @@ from femstudy import atomic, fe
 from femstudy.casefile import Case, with_overrides
 from femstudy.execution import Executor, InProcess
 from femstudy.fe.linsolve import available_memory_bytes
-from femstudy.kept_answers import kept_answer, prune
+from femstudy.kept_answers import kept_answer
 from femstudy.meshing.cache import DEFAULT_CACHE_DIR
 from femstudy.meshing.model import surface_file
 from femstudy.study import feasibility, mesh_convergence, output, plausibility, sensitivity
@@ -159,9 +159,7 @@ def run_study(case: Case, out_dir: str | PathLike | None = None, *, mesh_size_mm
         file_parts = () if folder is None else output.start_file_parts(executor, folder, model, loading.times_s)
         # the march and its outputs, a function of what key holds, read back when an earlier run kept them
         step = kept_answer(answers, "thesis step", key, partial(_thesis_step, case, fs, model, loading, shapes),
-                           lambda kept: replace(kept, kept=True), _worth_keeping)
-        if answers is not None:
-            prune(answers, "thesis step", KEPT_STEPS)
+                           lambda kept: replace(kept, kept=True), _worth_keeping, newest=KEPT_STEPS)
         marched = time.perf_counter()
         if file_parts:
             log.info("writing results to %s", out_dir)
