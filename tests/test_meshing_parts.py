@@ -248,3 +248,13 @@ def test_self_intersections_are_found_and_refused():
     assert len(self_intersections(pushed, sphere.regular_faces)) > 0
     with pytest.raises(UserError, match="the surface intersects itself"):
         prepare(pv.PolyData.from_regular_faces(pushed, sphere.regular_faces), "pushed")
+
+
+def test_candidate_pairs_are_reduced_to_distinct_unordered_pairs_in_order():
+    from femstudy.meshing.intersections import _unique_pairs
+
+    rng = np.random.default_rng(7)
+    pairs = rng.integers(0, 50, (5000, 2))
+    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
+    assert np.array_equal(_unique_pairs(pairs, 50), np.unique(np.sort(pairs, axis=1), axis=0))
+    assert _unique_pairs(np.empty((0, 2), int), 50).shape == (0, 2)

@@ -32,6 +32,18 @@ def _segment_hits(p0, p1, a, b, c, eps):
     return ok & (u > tol) & (v > tol) & (u + v < 1 - tol) & (t > tol) & (t < 1 - tol)
 
 
+def _unique_pairs(pairs: np.ndarray, n: int) -> np.ndarray:
+    """The distinct unordered pairs (i < j) among ``pairs`` of indices below ``n``, in
+    lexicographic order. Each pair is one integer i·n + j, sorted, and repeats dropped:
+    ``np.unique`` (rows, or numpy ≥ 2.3's hashing of the integers) takes 1.6–2.5 s for the
+    built-in femur's 2.4 million candidate pairs, a sort 0.15 s."""
+    ordered = np.sort(pairs, axis=1).astype(np.int64)
+    key = np.sort(ordered[:, 0] * n + ordered[:, 1])
+    first = np.ones(len(key), bool)
+    first[1:] = key[1:] != key[:-1]
+    return np.column_stack(np.divmod(key[first], n))
+
+
 def self_intersections(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """Pairs (k, 2) of triangle indices that cross each other and share no vertex."""
     v = points[triangles]
@@ -47,7 +59,7 @@ def self_intersections(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         near = np.asarray(near, int)
         near = near[near != k]
         pairs.append(np.column_stack([np.full(len(near), k), near]))
-    pairs = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0)
+    pairs = _unique_pairs(np.concatenate(pairs), len(triangles))
     if len(pairs) == 0:
         return np.empty((0, 2), int)
     eps = 1e-12 * np.ptp(points, axis=0).max() ** 2
