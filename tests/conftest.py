@@ -50,8 +50,21 @@ def bone_library(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="session")
 def mesh_cache(tmp_path_factory):
-    """One mesh cache per test session and xdist worker, so the built-in femur is meshed once
-    per worker. Not shared between workers: TetWild is not deterministic, so two workers meshing
-    one femur at once store different meshes under one key, and a test holding the first would
-    read back the second."""
+    """One cache per test session and xdist worker, for tests that count factorisations, clear
+    kept answers or expect a first run to compute: what another worker's tests keep cannot reach
+    them."""
     return tmp_path_factory.mktemp("mesh-cache")
+
+
+@pytest.fixture(scope="session")
+def shared_cache(tmp_path_factory):
+    """One cache for the whole session, every xdist worker included, for tests that only use
+    meshes and kept answers (the documentation's scripts, the examples, the sweeps): each mesh
+    is built once, however many workers ask for it at once (a second one waits on the entry's
+    build lock and loads it, femstudy.meshing.cache; TetWild is not deterministic, so two builds
+    of one key would differ), and an answer kept by one test serves the others."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # workers' basetemps share a parent
+    folder = root / "shared-cache"
+    folder.mkdir(exist_ok=True)
+    return folder

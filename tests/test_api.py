@@ -21,8 +21,8 @@ def test_no_public_name_is_shadowed_by_a_module():
     assert callable(femstudy.femur_model) and callable(femstudy.prepare)
 
 
-def test_paths_may_be_given_as_strings(tmp_path, mesh_cache):
+def test_paths_may_be_given_as_strings(tmp_path, shared_cache):
     case = femstudy.load_case(str(REPO / "cases" / "middiaphysis.toml"))
-    model = femstudy.mesh_case(case, str(tmp_path / "mesh"), mesh_size_mm=16, cache_dir=str(mesh_cache))
+    model = femstudy.mesh_case(case, str(tmp_path / "mesh"), mesh_size_mm=16, cache_dir=str(shared_cache))
     assert (tmp_path / "mesh" / "mesh.vtu").is_file() and model.mesh.n_tets > 0
-    assert femstudy.prepare(with_overrides(case, {"mesh.size_mm": 16.0}), str(mesh_cache)).system.n_dofs > 0
+    assert femstudy.prepare(with_overrides(case, {"mesh.size_mm": 16.0}), str(shared_cache)).system.n_dofs > 0

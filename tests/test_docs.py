@@ -2,9 +2,9 @@
 
 Every fenced block says what it is:
 
-- ``python``: a script; it is executed, in a fresh folder holding a copy of ``cases/`` and this
-  worker's mesh cache as ``.femstudy-cache`` (so it runs as a user in a checkout would, on the
-  meshes the other tests already made);
+- ``python``: a script; it is executed, in a fresh folder holding a copy of ``cases/`` and the
+  session's shared cache as ``.femstudy-cache`` (so it runs as a user in a checkout would, on the
+  meshes and answers the other tests already made);
 - ``toml``: case-file sections; they must validate as a case;
 - ``console``: a transcript: lines starting with ``$ `` are commands, the rest their output;
   each ``femstudy`` command must parse (its options and choices exist) and the case, sweep and
@@ -49,10 +49,10 @@ def test_every_block_says_what_it_is(language, code):
 
 
 @pytest.fixture
-def checkout(tmp_path, mesh_cache, monkeypatch):
+def checkout(tmp_path, shared_cache, monkeypatch):
     """A folder like a user's checkout: cases/ and the mesh cache, nothing else."""
     shutil.copytree(REPO / "cases", tmp_path / "cases")
-    (tmp_path / ".femstudy-cache").symlink_to(mesh_cache, target_is_directory=True)
+    (tmp_path / ".femstudy-cache").symlink_to(shared_cache, target_is_directory=True)
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("FEMSTUDY_BONES", str(tmp_path / "bones"))
     return tmp_path

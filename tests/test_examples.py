@@ -32,23 +32,23 @@ def test_examples_import_only_the_public_api(path):
             assert node.attr in femstudy.__all__, f"{path.name}: femstudy.{node.attr} is not public"
 
 
-def test_study_example(tmp_path, mesh_cache, capsys):
-    result = load("study").main(tmp_path / "study", mesh_size_mm=16.0, cache_dir=mesh_cache)
+def test_study_example(tmp_path, shared_cache, capsys):
+    result = load("study").main(tmp_path / "study", mesh_size_mm=16.0, cache_dir=shared_cache)
     assert (tmp_path / "study" / "summary.json").is_file()
     assert result.peak("max_deflection_mm").value > result.peak("max_deflection_mm", "static").value > 0
     assert "dynamic amplification" in capsys.readouterr().out
 
 
-def test_sweep_over_two_femurs_example(tmp_path, mesh_cache):
-    result = load("sweep_two_femurs").main(tmp_path, mesh_size_mm=16.0, cache_dir=mesh_cache)
+def test_sweep_over_two_femurs_example(tmp_path, shared_cache):
+    result = load("sweep_two_femurs").main(tmp_path, mesh_size_mm=16.0, cache_dir=shared_cache)
     small, builtin = (next(r for r in result.rows if r["geometry.surface"] == s) for s in ("small_femur.stl", "builtin"))
     # a shorter, slimmer femur under the same loads: a different model and a different deflection
     assert small["dofs"] != builtin["dofs"] and small["max_deflection_mm_dynamic"] != builtin["max_deflection_mm_dynamic"]
     assert (tmp_path / "sweep" / "sweep.md").is_file()
 
 
-def test_calibrate_then_run_example(tmp_path, mesh_cache):
-    calibration, result = load("calibrate_then_run").main(tmp_path, mesh_size_mm=16.0, cache_dir=mesh_cache,
+def test_calibrate_then_run_example(tmp_path, shared_cache):
+    calibration, result = load("calibrate_then_run").main(tmp_path, mesh_size_mm=16.0, cache_dir=shared_cache,
                                                           replicates=4)
     assert (tmp_path / "bones" / "examplebone.toml").is_file()
     assert result.to_json()["loading"]["bone_set"] == "examplebone"

@@ -13,6 +13,7 @@ CASE = """
 name = "sweeptest"
 [mesh]
 size_mm = 16.0
+envelope = 0.002  # the README sweep's envelopes (1e-3 at 8 mm, scaled): its TetWild meshes serve this one
 order = 1
 [loads]
 stations = 1
@@ -34,16 +35,16 @@ def case_file(tmp_path_factory):
     return path
 
 
-def test_mesh_sweep_writes_table_and_convergence_assessment(case_file, mesh_cache, tmp_path):
+def test_mesh_sweep_writes_table_and_convergence_assessment(case_file, shared_cache, tmp_path):
     out = tmp_path / "mesh"
     proc = run_cli("sweep", str(case_file), "--sizes", "32,24,16", "--order", "1", "--out", str(out),
-                   env={"FEMSTUDY_CACHE": str(mesh_cache)}, timeout=900)
+                   env={"FEMSTUDY_CACHE": str(shared_cache)}, timeout=900)
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader((out / "sweep.csv").open()))
     assert [float(r["size_mm"]) for r in rows] == [32.0, 24.0, 16.0, 24.0, 24.0]  # the middle size remeshed twice
     assert rows[-1]["point"].endswith("(remeshed 2)")
     # the envelope scales with the size, so the meshes refine everywhere together
-    assert [float(r["envelope"]) for r in rows[:3]] == pytest.approx([2e-3, 1.5e-3, 1e-3])
+    assert [float(r["envelope"]) for r in rows[:3]] == pytest.approx([4e-3, 3e-3, 2e-3])
     h = [float(r["h_rep_mm"]) for r in rows[:3]]
     assert h[0] > h[1] > h[2], h
     dofs = [int(r["dofs"]) for r in rows[:3]]
@@ -76,15 +77,15 @@ def test_mesh_sweep_writes_table_and_convergence_assessment(case_file, mesh_cach
             assert len(image.convert("RGB").getcolors(1 << 20)) > 20, figure.name
     # resumed: nothing recomputed, same table
     again = run_cli("sweep", str(case_file), "--sizes", "32,24,16", "--order", "1", "--out", str(out),
-                    env={"FEMSTUDY_CACHE": str(mesh_cache)})
+                    env={"FEMSTUDY_CACHE": str(shared_cache)})
     assert again.returncode == 0 and "5 of 5 points already finished" in again.stderr, again.stderr
     assert list(csv.DictReader((out / "sweep.csv").open())) == rows
 
 
-def test_parameter_sweep_is_linear_in_load_and_identical_on_dask(case_file, mesh_cache, tmp_path):
+def test_parameter_sweep_is_linear_in_load_and_identical_on_dask(case_file, shared_cache, tmp_path):
     sweep = tmp_path / "scale.toml"
     sweep.write_text(f'case = "{case_file.as_posix()}"\nname = "scale"\n[grid]\n"drilling.load_scale" = [1.0, 2.0]\n')
-    env = {"FEMSTUDY_CACHE": str(mesh_cache)}
+    env = {"FEMSTUDY_CACHE": str(shared_cache)}
     local = run_cli("sweep", str(sweep), "--out", str(tmp_path / "local"), "--workers", "2", env=env)
     assert local.returncode == 0, local.stderr
     rows = list(csv.DictReader((tmp_path / "local" / "sweep.csv").open()))
