@@ -47,9 +47,10 @@ def cells_along(mesh: TetMesh, start, direction, distances) -> np.ndarray:
     inverse = np.linalg.inv(np.swapaxes(corners[candidates, 1:] - origin[:, None], 1, 2))
     lam = np.einsum("pij,pj->pi", inverse[owner], start + np.outer(s[sample], direction) - origin[owner])
     inside = (lam >= -TOLERANCE).all(axis=1) & (lam.sum(axis=1) <= 1 + TOLERANCE)
-    found = np.full(s.size, np.iinfo(np.int64).max)
+    none = np.iinfo(np.int64).max  # no tet yet: above every index, so the lowest one found wins
+    found = np.full(s.size, none)
     np.minimum.at(found, sample[inside], candidates[owner[inside]])
-    found[found == np.iinfo(np.int64).max] = -1
+    found[found == none] = -1
     return found
 
 
