@@ -39,7 +39,9 @@ def blocks(language: str | None = None) -> list:
         for match in FENCE.finditer(text):
             line = text.count("\n", 0, match.start()) + 1
             if language is None or match.group(1) == language:
-                found.append(pytest.param(match.group(1), match.group(2), id=f"{path.name}:{line}"))
+                heavy = language == "python" and "run_study(" in match.group(2)  # a whole study
+                found.append(pytest.param(match.group(1), match.group(2), id=f"{path.name}:{line}",
+                                          marks=pytest.mark.slow if heavy else ()))
     return found
 
 

@@ -32,6 +32,7 @@ def test_examples_import_only_the_public_api(path):
             assert node.attr in femstudy.__all__, f"{path.name}: femstudy.{node.attr} is not public"
 
 
+@pytest.mark.slow
 def test_study_example(tmp_path, shared_cache, capsys):
     result = load("study").main(tmp_path / "study", mesh_size_mm=16.0, cache_dir=shared_cache)
     assert (tmp_path / "study" / "summary.json").is_file()
@@ -39,6 +40,7 @@ def test_study_example(tmp_path, shared_cache, capsys):
     assert "dynamic amplification" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_sweep_over_two_femurs_example(tmp_path, shared_cache):
     result = load("sweep_two_femurs").main(tmp_path, mesh_size_mm=16.0, cache_dir=shared_cache)
     small, builtin = (next(r for r in result.rows if r["geometry.surface"] == s) for s in ("small_femur.stl", "builtin"))
@@ -47,6 +49,7 @@ def test_sweep_over_two_femurs_example(tmp_path, shared_cache):
     assert (tmp_path / "sweep" / "sweep.md").is_file()
 
 
+@pytest.mark.slow
 def test_calibrate_then_run_example(tmp_path, shared_cache):
     calibration, result = load("calibrate_then_run").main(tmp_path, mesh_size_mm=16.0, cache_dir=shared_cache,
                                                           replicates=4)
