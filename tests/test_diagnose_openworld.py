@@ -44,6 +44,20 @@ def test_a_decoy_is_unexplained_and_not_named(kind, i, shape, folder):
     assert js["residual_check"]["consistent_with_noise"] is False   # and the report does not hide it
 
 
+def test_a_feed_off_by_twelve_percent_is_not_read_as_two_inverted_channels(folder):
+    """feed_or_clock case 1: the recording correlates poorly with the trace at every lag (0.22 at
+    its own clock). A mirror placement 15 s later with both channels turned over has the clearer
+    weaker edge; placed there, clogging was named. Nothing being clear, the trace's own clock and
+    the channels' signs stand."""
+    from femstudy.diagnosis import inputs
+    from femstudy.recordings import read_recording
+
+    case = make_case("feed_or_clock", case_seed("feed_or_clock", 1), folder)
+    rec = read_recording(case.recording)
+    sim, correlations = inputs.on_recording_clock(inputs.read_trace(case.simulation, rec), rec)
+    assert min(correlations) > 0 and not sim.note
+
+
 @pytest.mark.slow
 def test_complete_simulation_under_ar1_noise_is_silent(folder):
     case, js = run("complete", 1, folder)   # AR(1) amplifier noise, time constant 0.16 s

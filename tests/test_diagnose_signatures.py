@@ -10,6 +10,7 @@ import pytest
 
 from femstudy.diagnosis import diagnose
 from femstudy.diagnosis.baseline import TraceSimulation
+from femstudy.diagnosis.timing import clock_offset_s
 from femstudy.recordings import Effects, Noise, SpindleRipple, synthesize
 
 NUISANCE = Effects(Noise(0.3, 1.0), SpindleRipple(0.05), None, None, None)
@@ -86,6 +87,58 @@ def test_a_jump_of_the_zero_in_air_is_not_a_drift(clogging_pair):
     steps = [u for u in d.unexplained if u.kind == "air_event" and "jumps" in u.description]
     assert steps and abs(steps[0].start_s - 1.0) < 0.15
     assert named(d) == {"chip_clogging"}
+
+
+@pytest.mark.parametrize("shift_s", [-1.7, 0.0, 0.9])
+@pytest.mark.parametrize("polarity", [1, -1])
+def test_a_drift_larger_than_the_load_moves_neither_the_clock_nor_the_polarity(shift_s, polarity):
+    """A trace on a clock of its own (moved by ``shift_s``) placed on a recording whose sensors
+    drift by up to three times the peak load, either way, with the thrust written upside down or
+    not: the lag found undoes the shift within 0.05 s (the alignment then refines it within
+    ±0.45 s) and the thrust's rate correlation has the thrust's sign, with both channels and with
+    the thrust alone. (When polarity was read from the levels alone, a drift the size of the load
+    turned both channels over and put the trace's entry on the recording's exit.)"""
+    rec = synthesize(2.5, 1200, effects=NUISANCE, seed=5)
+    trace = TraceSimulation.from_recording(synthesize(2.5, 1200, model="allotta", effects=Effects.none(),
+                                                      sample_rate_hz=400), 1200)
+    sim = replace(trace, time_s=trace.time_s + shift_s)
+    ramp = (rec.time_s - rec.time_s[0]) / np.ptp(rec.time_s)
+    for drift in (0.0, 1.0, -1.0, 3.0, -3.0):
+        thrust = polarity * rec.thrust_N + drift * ramp * np.ptp(rec.thrust_N)
+        torque = rec.torque_Nmm + drift * ramp * np.ptp(rec.torque_Nmm)
+        for channels in ([thrust, torque], [thrust]):
+            lag, _, correlations = clock_offset_s(rec.time_s, channels, sim, 1200)
+            assert lag == pytest.approx(-shift_s, abs=0.05), (drift, len(channels))
+            assert np.sign(correlations[0]) == polarity, (drift, len(channels))
+
+
+@pytest.mark.parametrize("polarity", [1, -1])
+def test_a_trace_that_ends_loaded_is_placed_with_its_polarity(polarity):
+    """A trace cut while the drill is still in the bone has one edge (its contact): its rates
+    cannot tell it from its mirror, and the plateau's level decides the sign."""
+    rec = synthesize(2.5, 1200, effects=NUISANCE, seed=5)
+    full = synthesize(2.5, 1200, model="allotta", effects=Effects.none(), sample_rate_hz=400)
+    keep = full.time_s < 4.0   # contact at 2.0 s, feed stop at 5.2 s
+    trace = TraceSimulation(full.time_s[keep] + 0.9, full.thrust_N[keep], full.torque_Nmm[keep], 1200)
+    assert trace.zero_before and not trace.zero_after
+    for channels in ([polarity * rec.thrust_N, rec.torque_Nmm], [polarity * rec.thrust_N]):
+        lag, _, correlations = clock_offset_s(rec.time_s, channels, trace, 1200)
+        assert lag == pytest.approx(-0.9, abs=0.05) and np.sign(correlations[0]) == polarity
+
+
+def test_a_feed_error_keeps_its_placement_and_polarity(tmp_path):
+    """A feed 6-15 % off the stated one (formbench tuning case decoy:feed_error 516000) blurs the
+    exit edge of the right placement (lag 7.81 s, mean rate correlation 0.79, weaker edge 0.25);
+    the mirror with both channels turned over has the clearer weaker edge (0.42) but correlates
+    0.44 overall. It must not win: no channel is read as upside down."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from femstudy.diagnosis import inputs
+    from femstudy.recordings import read_recording
+
+    case = make_formbench_case("decoy:feed_error", 516_000, "tuning", tmp_path)
+    rec = read_recording(case.recording)
+    sim, correlations = inputs.on_recording_clock(inputs.read_trace(case.simulation, rec), rec)
+    assert min(correlations) > 0.5 and "moved by +7.81" in sim.note
 
 
 def test_epoch_time_stamps_give_the_diagnosis_of_plain_ones(clogging_pair, plain, tmp_path):

@@ -6,7 +6,7 @@ error). They are checked before anything is fitted, reported as findings (the ``
 list, with ``kind`` below), and corrected so that the diagnosis can go on:
 
 - ``polarity``: the channel's rate of change correlates *negatively* with the simulation's at the
-  best clock lag (:func:`.timing.clock_offset_s` places the trace by the absolute correlation);
+  best clock lag (:func:`.timing.clock_offset_s` tries both signs of every channel);
   or, against a load model, the thrust's excursion from its baseline is downward. The channel
   is negated.
 Scales and pairings are read from level ratios (:func:`_level_ratio`): the median of the channel

@@ -28,21 +28,26 @@ recording and of the trace (both channels when both have torque), smoothed by a 
 ``CLOCK_SMOOTHING_S`` and sampled every ``CLOCK_STEP_S``, over every lag that keeps the trace's
 contact ``CONTACT_MARGIN_S`` inside the recording. The rates peak at the edges — contact,
 breakthrough, stop — so tare, scale, a drift or a clogging trend change the correlation's value,
-not where it peaks. A channel written upside down is placed too: its polarity is the sign of its
-strongest level correlation over all lags (a rate alone cannot tell an inverted channel from the
-trace's entry put on the recording's exit). A recording whose own clock runs a few percent fast or slow correlates
-poorly everywhere, and its best lag can be spurious: the trace's own clock (lag 0, when it puts
-the contact inside the recording) is kept unless another lag correlates better by
-``CLOCK_PREFERENCE``.
+not where it peaks. A channel written upside down is placed too (a rate alone cannot tell an
+inverted channel from the trace's entry put on the recording's exit): its sign is that of its
+strongest level correlation, where the plateau of the cut meets the recording's. A sensor drift
+larger than the load can turn that over, so for a trace with both edges the rates around each
+edge overrule the levels when they clearly show another placement: at a mirror lag one of the
+trace's edges lies in air. A recording whose own clock runs a few percent fast or slow correlates poorly everywhere, and its
+best lag can be spurious: the trace's own clock (lag 0, when it puts the contact inside the
+recording) is kept unless another lag correlates better by ``CLOCK_PREFERENCE``.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+
+from femstudy.diagnosis.sanity import MIN_CORRELATION
 
 #: The trace is smoothed over this fraction of l/f (at least 20 ms or half a revolution) for its
 #: events, and a fall may pause this long: a simulation's loads can move in steps (lip elements,
@@ -67,6 +72,10 @@ CLOCK_SMOOTHING_S = 0.1
 #: A placement keeps the trace's contact this far inside the recording [s] (after its start;
 #: a full second before its end).
 CONTACT_MARGIN_S = 0.3
+#: A trace's edge is where its thrust's rate exceeds this fraction of the largest on its side of
+#: the cut's middle, widened by this margin [s] (twice the smoothing) ...
+EDGE_FRACTION = 0.2
+EDGE_MARGIN_S = 0.2
 #: The trace's own clock (lag 0) is kept unless another lag correlates better by this much.
 CLOCK_PREFERENCE = 0.1
 
@@ -161,10 +170,22 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
 
     The rates place the lag precisely but cannot tell a channel written upside down from a wrong
     lag: the entry's rise and the exit's fall are edges of similar size, so the trace's entry put
-    on the recording's exit correlates as strongly, with the opposite sign. The levels can: the
-    plateau of the cut correlates with the recording's plateau far more than with anything at a
-    mirror lag. So each channel's polarity is the sign of its level correlation of largest size
-    over all lags, and the lag maximises the mean rate correlation taken with those signs."""
+    on the recording's exit correlates as strongly (often more, when clogging made the exit the
+    larger edge), with the opposite sign. The levels can: the plateau of the cut correlates with
+    the recording's plateau far more than with anything at a mirror lag. So each channel's sign
+    is that of its level correlation of largest size over all lags, and the lag maximises the
+    mean rate correlation taken with those signs.
+
+    A sensor drift larger than the load correlates with a plateau put anywhere and can turn the
+    levels' signs over. A trace with both edges (load-free before contact and after the stop)
+    has a second witness: at its right placement both edges meet edges of the recording, at a
+    mirror one an edge lies in air. So every choice of signs also takes its best lag, and is
+    scored by its weaker edge (the signed rate correlation around the trace's entry and around
+    its exit); the best of them overrules the levels' choice when its weaker edge correlates at
+    least at :data:`~.sanity.MIN_CORRELATION` and better than the levels' choice by
+    ``CLOCK_PREFERENCE``, and its mean rate correlation is not worse by more than that: the
+    ambiguity is between placements that correlate about as well. A feed or clock off by some
+    percent blurs one edge at the right placement; there the levels' choice stands."""
     grid = np.arange(rec_t[0], rec_t[-1], CLOCK_STEP_S)
     width = CLOCK_SMOOTHING_S / CLOCK_STEP_S
 
@@ -183,6 +204,34 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     begin = np.searchsorted(grid, lags + lo_span, side="left")
     end = np.searchsorted(grid, lags + hi_span, side="right")
     n_channels = min(sum(1 for s in sim.loads(grid[:1]) if s is not None), len(recorded))
+
+    def trace_levels(rows: np.ndarray, chunk: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The placed trace's smoothed levels and rates on ``grid[rows]`` (lags ``lags[chunk]``)."""
+        loads = [level(s) for s in sim.loads(grid[rows] - lags[chunk, None]) if s is not None][:n_channels]
+        return [(s, np.gradient(s, axis=-1)) for s in loads]
+
+    def weaker_edge(k: int, signs: np.ndarray) -> float:
+        """The weaker of the signed rate correlations around the placed trace's two edges (its
+        entry and its exit: where its thrust's rate exceeds ``EDGE_FRACTION`` of the largest on
+        that side of the cut's middle, widened by ``EDGE_MARGIN_S``); 0 for an edge the recording
+        does not hold."""
+        rows = np.arange(begin[k], end[k])
+        t = grid[rows]
+        rates = [rate[0] for _, rate in trace_levels(rows[None], np.array([k]))]
+        steep = np.abs(rates[0])
+        middle = (sim.contact_s + sim.stop_s) / 2 + lags[k]
+        scores = []
+        for side in (t < middle, t >= middle):
+            edge = side & (steep > EDGE_FRACTION * np.max(steep, where=side, initial=0.0))
+            if not edge.any():
+                return 0.0
+            window = (t >= t[edge].min() - EDGE_MARGIN_S) & (t <= t[edge].max() + EDGE_MARGIN_S)
+            if np.count_nonzero(window) < 20:
+                return 0.0
+            scores.append(np.mean([sign * _correlation(recorded[c][rows[window]][None], rate[window][None])[0]
+                                   for c, (sign, rate) in enumerate(zip(signs, rates))]))
+        return min(scores)
+
     by_rate = np.full((n_channels, lags.size), np.nan)
     by_level = np.zeros((n_channels, lags.size))
     for n in np.unique(end - begin):
@@ -191,20 +240,33 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
         group = np.flatnonzero(end - begin == n)
         for chunk in np.array_split(group, max(1, group.size * n // 500_000 + 1)):
             index = begin[chunk, None] + np.arange(n)
-            loads = [s for s in sim.loads(grid[index] - lags[chunk, None]) if s is not None][:n_channels]
-            for c, s in enumerate(loads):
-                smooth = level(s)
-                by_rate[c, chunk] = _correlation(recorded[c][index], np.gradient(smooth, axis=-1))
+            for c, (smooth, rate) in enumerate(trace_levels(index, chunk)):
+                by_rate[c, chunk] = _correlation(recorded[c][index], rate)
                 by_level[c, chunk] = _correlation(levels[c][index], smooth)
     if not np.isfinite(by_rate).any():
         return 0.0, -math.inf, tuple(1.0 for _ in range(n_channels))  # too little overlap anywhere
+    complete = np.isfinite(by_rate).all(axis=0)
+
+    def best_lag(signs: np.ndarray) -> tuple[int, float]:
+        value = np.where(complete, np.mean(signs[:, None] * np.nan_to_num(by_rate), axis=0), -np.inf)
+        k = int(np.argmax(value))
+        if own and value[0] >= value[k] - CLOCK_PREFERENCE:
+            k = 0
+        return k, float(value[k])
+
     strongest = np.argmax(np.abs(by_level), axis=1)
-    signs = np.where(by_level[np.arange(n_channels), strongest] < 0, -1.0, 1.0)
-    value = np.where(np.isfinite(by_rate).all(axis=0), np.mean(signs[:, None] * np.nan_to_num(by_rate), axis=0), -np.inf)
-    k = int(np.argmax(value))
-    if own and value[0] >= value[k] - CLOCK_PREFERENCE:
-        k = 0
-    return float(lags[k]), float(value[k]), tuple(float(v) for v in by_rate[:, k])
+    by_levels = np.where(by_level[np.arange(n_channels), strongest] < 0, -1.0, 1.0)
+    k, value = best_lag(by_levels)
+    if sim.zero_before and sim.zero_after:   # both edges: their rates can overrule the levels
+        placements = []
+        for signs in map(np.array, itertools.product((1.0, -1.0), repeat=n_channels)):
+            k_signs, value_signs = best_lag(signs)
+            placements.append((weaker_edge(k_signs, signs), k_signs, value_signs))
+        edge, k_edge, value_edge = max(placements)
+        clearer = edge >= MIN_CORRELATION and edge >= weaker_edge(k, by_levels) + CLOCK_PREFERENCE
+        if clearer and value_edge >= value - CLOCK_PREFERENCE:
+            k, value = k_edge, value_edge
+    return float(lags[k]), value, tuple(float(v) for v in by_rate[:, k])
 
 
 def _correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
