@@ -33,9 +33,10 @@ inverted channel from the trace's entry put on the recording's exit): its sign i
 strongest level correlation, where the plateau of the cut meets the recording's. A sensor drift
 larger than the load can turn that over, so for a trace with both edges the rates around each
 edge overrule the levels when they clearly show another placement: at a mirror lag one of the
-trace's edges lies in air. A recording whose own clock runs a few percent fast or slow correlates poorly everywhere, and its
-best lag can be spurious: the trace's own clock (lag 0, when it puts the contact inside the
-recording) is kept unless another lag correlates better by ``CLOCK_PREFERENCE``.
+trace's edges lies in air. A recording whose own clock runs a few percent fast or slow
+correlates poorly everywhere, and its best lag can be spurious: the trace's own clock (lag 0,
+when it puts the contact inside the recording) is kept unless another lag correlates better by
+``CLOCK_PREFERENCE``.
 """
 
 from __future__ import annotations
@@ -72,8 +73,8 @@ CLOCK_SMOOTHING_S = 0.1
 #: A placement keeps the trace's contact this far inside the recording [s] (after its start;
 #: a full second before its end).
 CONTACT_MARGIN_S = 0.3
-#: A trace's edge is where its thrust's rate exceeds this fraction of the largest on its side of
-#: the cut's middle, widened by this margin [s] (twice the smoothing) ...
+#: A trace's edge (entry or exit) is where its thrust's rate exceeds ``EDGE_FRACTION`` of the
+#: largest on its side of the cut's middle, widened by ``EDGE_MARGIN_S`` [s] (twice the smoothing).
 EDGE_FRACTION = 0.2
 EDGE_MARGIN_S = 0.2
 #: The trace's own clock (lag 0) is kept unless another lag correlates better by this much.
