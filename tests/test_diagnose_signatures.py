@@ -89,18 +89,25 @@ def test_a_jump_of_the_zero_in_air_is_not_a_drift(clogging_pair):
     assert named(d) == {"chip_clogging"}
 
 
+@pytest.fixture(scope="module")
+def feed_pair():
+    """A recording at 2.5 mm/s and 1200 rpm, and the noise-free Allotta load history of the same
+    cut (contact at 2.0 s, feed stop at 5.2 s)."""
+    rec = synthesize(2.5, 1200, effects=NUISANCE, seed=5)
+    return rec, synthesize(2.5, 1200, model="allotta", effects=Effects.none(), sample_rate_hz=400)
+
+
 @pytest.mark.parametrize("shift_s", [-1.7, 0.0, 0.9])
 @pytest.mark.parametrize("polarity", [1, -1])
-def test_a_drift_larger_than_the_load_moves_neither_the_clock_nor_the_polarity(shift_s, polarity):
+def test_a_drift_larger_than_the_load_moves_neither_the_clock_nor_the_polarity(feed_pair, shift_s, polarity):
     """A trace on a clock of its own (moved by ``shift_s``) placed on a recording whose sensors
     drift by up to three times the peak load, either way, with the thrust written upside down or
     not: the lag found undoes the shift within 0.05 s (the alignment then refines it within
     ±0.45 s) and the thrust's rate correlation has the thrust's sign, with both channels and with
     the thrust alone. (When polarity was read from the levels alone, a drift the size of the load
     turned both channels over and put the trace's entry on the recording's exit.)"""
-    rec = synthesize(2.5, 1200, effects=NUISANCE, seed=5)
-    trace = TraceSimulation.from_recording(synthesize(2.5, 1200, model="allotta", effects=Effects.none(),
-                                                      sample_rate_hz=400), 1200)
+    rec, full = feed_pair
+    trace = TraceSimulation.from_recording(full, 1200)
     sim = replace(trace, time_s=trace.time_s + shift_s)
     ramp = (rec.time_s - rec.time_s[0]) / np.ptp(rec.time_s)
     for drift in (0.0, 1.0, -1.0, 3.0, -3.0):
@@ -113,12 +120,11 @@ def test_a_drift_larger_than_the_load_moves_neither_the_clock_nor_the_polarity(s
 
 
 @pytest.mark.parametrize("polarity", [1, -1])
-def test_a_trace_that_ends_loaded_is_placed_with_its_polarity(polarity):
+def test_a_trace_that_ends_loaded_is_placed_with_its_polarity(feed_pair, polarity):
     """A trace cut while the drill is still in the bone has one edge (its contact): its rates
     cannot tell it from its mirror, and the plateau's level decides the sign."""
-    rec = synthesize(2.5, 1200, effects=NUISANCE, seed=5)
-    full = synthesize(2.5, 1200, model="allotta", effects=Effects.none(), sample_rate_hz=400)
-    keep = full.time_s < 4.0   # contact at 2.0 s, feed stop at 5.2 s
+    rec, full = feed_pair
+    keep = full.time_s < 4.0   # before the feed stop
     trace = TraceSimulation(full.time_s[keep] + 0.9, full.thrust_N[keep], full.torque_Nmm[keep], 1200)
     assert trace.zero_before and not trace.zero_after
     for channels in ([polarity * rec.thrust_N, rec.torque_Nmm], [polarity * rec.thrust_N]):

@@ -259,12 +259,13 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     by_levels = np.where(by_level[np.arange(n_channels), strongest] < 0, -1.0, 1.0)
     k, value = best_lag(by_levels)
     if sim.zero_before and sim.zero_after:   # both edges: their rates can overrule the levels
-        placements = []
-        for signs in map(np.array, itertools.product((1.0, -1.0), repeat=n_channels)):
-            k_signs, value_signs = best_lag(signs)
-            placements.append((weaker_edge(k_signs, signs), k_signs, value_signs))
-        edge, k_edge, value_edge = max(placements)
-        clearer = edge >= MIN_CORRELATION and edge >= weaker_edge(k, by_levels) + CLOCK_PREFERENCE
+        placements = {}
+        for signs in itertools.product((1.0, -1.0), repeat=n_channels):
+            k_signs, value_signs = best_lag(np.array(signs))
+            placements[signs] = (weaker_edge(k_signs, np.array(signs)), k_signs, value_signs)
+        edge, k_edge, value_edge = max(placements.values())
+        levels_edge = placements[tuple(float(s) for s in by_levels)][0]   # the levels' own choice
+        clearer = edge >= MIN_CORRELATION and edge >= levels_edge + CLOCK_PREFERENCE
         if clearer and value_edge >= value - CLOCK_PREFERENCE:
             k, value = k_edge, value_edge
     return float(lags[k]), value, tuple(float(v) for v in by_rate[:, k])
