@@ -5,8 +5,8 @@ Steps (each in its module): the inputs, with timing and geometry from the simula
 the analysis band, the robust alignment, the events in air and the noise model fitted there
 (:mod:`.prepare`, :mod:`.air`, :mod:`.noise`); the mismatch of the aligned simulation
 (:mod:`.locate`); every subset of the catalogue (:mod:`.catalogue`) fitted with shape-flexible
-forms (:mod:`.search`, :mod:`.fit`); selection by information, size, signatures and held-out
-prediction (:mod:`.select`); shapes outside the catalogue competing and characterising the rest
+forms (:mod:`.search`, :mod:`.fit`); selection by information, size and signatures
+(:mod:`.select`); shapes outside the catalogue competing and characterising the rest
 (:mod:`.verdict`, :mod:`.outside`); confidence (:mod:`.confidence`); held-out R² (:mod:`.heldout`).
 
 Calibration: when the selected model still leaves more than noise (χ² test p ≤ RESIDUAL_P) and a

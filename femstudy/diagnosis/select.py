@@ -1,4 +1,4 @@
-"""Which mechanisms are missing: information criterion, physical size, signatures, held-out prediction.
+"""Which mechanisms are missing: information criterion, physical size, signatures.
 
 1. BIC of every subset s (its best variant, :mod:`.search`) on the effective sample count:
    BIC(s) = χ²(s) · n_eff/n + k(s) ln n_eff, with χ² inflated per channel by the misfit of the
@@ -10,10 +10,11 @@
      scale; each drop-one subset is also refitted from the larger optimum, and keeps the better);
    - a physically meaningful size (each mechanism's ``floor``);
    - the mechanism's signature tests (:meth:`~.catalogue.Mechanism.checks`): a residual that has
-     the size but not the signature of a mechanism is not that mechanism;
-   - held-out prediction: in ``FOLDS`` contiguous blocks of the compared window, each refitted
-     without it (alignment held), the subset with the mechanism predicts the held-out blocks
-     better than without it.
+     the size but not the signature of a mechanism is not that mechanism.
+
+   Held-out prediction does not decide: the flexible shapes' local coefficients are unpinned in a
+   held-out block, so true mechanisms predict it poorly too (docs/diagnosis.md §8); the held-out
+   R² is reported (:mod:`.heldout`).
 3. Posterior inclusion probability of each mechanism from the BIC weights exp(−BIC/2).
 4. Residual check: the χ² test of the selected model against the noise model.
 """
@@ -34,7 +35,6 @@ from femstudy.diagnosis.signatures import refitter
 MIN_DELTA_BIC = 10.0
 #: A residual χ² test p-value at or below this is "not consistent with noise".
 RESIDUAL_P = 1e-3
-FOLDS = 5
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,6 @@ class Selection:
     inclusion: dict[str, float]
     dropped: tuple[Dropped, ...]
     checks: dict[str, tuple[Check, ...]]
-    held_out: dict[frozenset, float]
     chi2_per_dof: float
     residual_p_value: float
     inflation: np.ndarray
@@ -78,30 +77,6 @@ def bic_table(problem: Problem, fits: dict) -> tuple[dict, np.ndarray]:
     return {s: information(problem, f, inflation) for s, f in fits.items()}, inflation
 
 
-def folds(problem: Problem) -> list[np.ndarray]:
-    """Row masks of ``FOLDS`` contiguous blocks of the compared window."""
-    t = problem.band.t_dec
-    block = np.minimum(np.floor((t - t[0]) / (t[-1] - t[0] + 1e-12) * FOLDS).astype(int), FOLDS - 1)
-    return [block == k for k in range(FOLDS)]
-
-
-ALIGNMENT = ("shift_correction_s", "stop_correction_mm")
-
-
-def held_out_chi2(problem: Problem, f: Fit, inflation: np.ndarray) -> float:
-    """Σ over folds of the χ² of each held-out block predicted by a fit on the others (the
-    alignment held at the full fit's)."""
-    total = 0.0
-    for block in folds(problem):
-        rows = problem.usable & block
-        if not rows.any():
-            continue
-        refit = fit(problem, f.spec, f.params(), rows=~block, fixed=ALIGNMENT)
-        total += sum(float(np.sum(problem.whiten(c, problem.y[c] - refit.model[c], rows) ** 2)) / k
-                     for c, k in enumerate(inflation))
-    return total
-
-
 def residual_test(problem: Problem, f: Fit) -> tuple[float, float]:
     """χ²/dof and the p-value of the χ² test of ``f``'s residual under the noise model."""
     dof = max(problem.n * problem.n_eff_factor - f.n_params, 1.0)
@@ -118,7 +93,6 @@ def select(problem: Problem, fits: dict) -> Selection:
     mechanisms = in_order({m for s in fits for m in s})
     inclusion = {m: sum(w for s, w in weights.items() if m in s) / total for m in mechanisms}
     dropped: list[Dropped] = []
-    held: dict[frozenset, float] = {}
     checks: dict[str, tuple[Check, ...]] = {}
     subset = best
     while subset:
@@ -153,5 +127,5 @@ def select(problem: Problem, fits: dict) -> Selection:
         dropped.append(Dropped(worst, reasons[worst][1], failures.get(worst, ())))
         subset = subset - {worst}
     chi2_dof, p_value = residual_test(problem, fits[subset])
-    return Selection(subset, bic, inclusion, tuple(dropped), {m: checks.get(m, ()) for m in in_order(subset)}, held,
+    return Selection(subset, bic, inclusion, tuple(dropped), {m: checks.get(m, ()) for m in in_order(subset)},
                      chi2_dof, p_value, inflation)
