@@ -23,14 +23,15 @@ noise of each channel is modelled as a stationary process, fitted on the recordi
    Below the lowest frequency the stretches resolve, f_r, the slowest noise is what decides whether
    a slow mechanism (a drift, a softening) is significant, and the few seconds of load-free data
    pin it poorly (a fitted corner there is as often the detrending's or the white part's as the
-   noise's): the coloured part keeps rising at least as f^(−max(α, 1)) (an amplifier's flicker)
-   from its level at f_r down to half the inverse of the compared window, flat below. Its level at
-   f_r counts only as far as it stands above one standard error of the lowest octave's periodogram,
-   (1/√m)(W + coloured): a few seconds of white noise fluctuate into a weak red part, and extrapolating
-   that over two decades would bury a real mechanism. The result is raised by
-   the standard error of the level it was fitted to, a factor 1 + 1/√m with m the periodogram
-   ordinates in the lowest octave [f_r, 2f_r], reached an octave below f_r: underrating the
-   slowest noise would make slow mechanisms look significant.
+   noise's): the coloured part keeps rising as 1/f (an amplifier's flicker, :data:`FLICKER`) from
+   its fitted level at f_r down to half the inverse of the compared window, flat below, unless the
+   fitted form lies higher. Not the steeper slope often fitted above f_r: that is an AR(1) part
+   above its corner, and carried two decades down it rated the slowest AR(1) noise ~900 times
+   above the truth (median of 20 draws of 6 s of air; with 1/f ~30 times, still never below it:
+   tests/test_diagnose_noise.py), which hid drifts of a tenth of the load. The result is raised by the standard error of the level it was
+   fitted to, a factor 1 + 1/√m with m the periodogram ordinates in the lowest octave
+   [f_r, 2f_r], reached an octave below f_r: underrating the slowest noise would make slow
+   mechanisms look significant.
 4. **Covariance of the analysis samples**: the band smooths with σ_g, so between two instants
    Δ apart C(Δ) = 2 ∫₀^∞ S(f) exp(−4π²σ_g²f²) cos(2πfΔ) df, integrated numerically. Near the
    window's edges the kernel is truncated; each sample's standard deviation is scaled by its
@@ -63,7 +64,7 @@ PRE_FRACTION = 1.0 / 3.0
 #: Bounds of the spectral exponent α (2: AR(1) or a random walk; 1: flicker noise).
 ALPHA_RANGE = (0.3, 2.0)
 #: Below the lowest frequency the data resolve, an unresolved corner is not assumed: the coloured
-#: part keeps rising at least as 1/f (an amplifier's flicker) down to half the window's inverse.
+#: part keeps rising as 1/f^FLICKER (an amplifier's flicker) down to half the window's inverse.
 FLICKER = 1.0
 #: A stretch of length L detrended by a line loses the power of its lowest periodogram bins: only
 #: frequencies from this many times 1/L are used (else a flattening that is not the noise's is fitted).
@@ -97,9 +98,8 @@ class NoiseSpectrum:
         out = self.fitted(f)
         if self.amplitude > 0:
             at = self.amplitude * (self.corner_hz ** 2 + self.resolved_hz ** 2) ** (-self.exponent / 2)
-            at = max(at - (self.low_margin - 1.0) * (self.white + at), 0.0)  # what stands one standard error
             ratio = self.resolved_hz / np.maximum(f, max(self.floor_hz, 1e-6))
-            flicker = self.white + at * ratio ** max(self.exponent, FLICKER)
+            flicker = self.white + at * ratio ** FLICKER
             out = np.where(below, np.maximum(out, flicker), out)
         octaves = np.clip(np.log2(self.resolved_hz / np.maximum(f, 1e-12)), 0.0, 1.0)
         return out * (1.0 + (self.low_margin - 1.0) * octaves)
