@@ -15,6 +15,7 @@ import numpy as np
 
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.problem import Problem
+
 BLOCKS = 4
 #: Held at the full fit's values in every refit: the clock shift and the stop depth are pinned by a
 #: few instants that a block may hold out, and they are not what is being predicted.

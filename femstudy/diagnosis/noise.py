@@ -27,9 +27,10 @@ noise of each channel is modelled as a stationary process, fitted on the recordi
    its fitted level at f_r down to half the inverse of the compared window, flat below, unless the
    fitted form lies higher. Not the steeper slope often fitted above f_r: that is an AR(1) part
    above its corner, and carried two decades down it rated the slowest AR(1) noise ~900 times
-   above the truth (median of 20 draws of 6 s of air; with 1/f ~30 times, still never below it:
-   tests/test_diagnose_noise.py), which hid drifts of a tenth of the load. The result is raised by the standard error of the level it was
-   fitted to, a factor 1 + 1/√m with m the periodogram ordinates in the lowest octave
+   above the truth at the window's floor (median of 20 draws of 6 s of air; with 1/f ~30 times,
+   and above the truth in every draw below 0.3 Hz: tests/test_diagnose_noise.py), which hid
+   drifts of a tenth of the load. The result is raised by the standard error of the level it
+   was fitted to, a factor 1 + 1/√m with m the periodogram ordinates in the lowest octave
    [f_r, 2f_r], reached an octave below f_r: underrating the slowest noise would make slow
    mechanisms look significant.
 4. **Covariance of the analysis samples**: the band smooths with σ_g, so between two instants
