@@ -1,6 +1,6 @@
 """``femstudy diagnose`` on concealed synthetic cases: the right mechanisms, the right sizes, silence
 when nothing is missing (one fixed-seed case per class of bench/synthetic_cases.py, femstudy's own
-generator, whose forms are the thesis's)."""
+generator, whose forms are the thesis's; four seeds for the class with three mechanisms at once)."""
 
 import math
 
