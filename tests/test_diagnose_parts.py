@@ -241,3 +241,31 @@ def test_a_rescaling_that_cannot_reach_noise_is_not_searched_and_changes_nothing
     assert any("refitted with the simulated loads rescaled: not better" in s for s in said)
     for key in ("missing_physics", "unexplained", "calibration", "fit"):
         assert skipped[key] == searched[key]
+
+
+def test_fits_spread_over_worker_processes_equal_the_fits_made_one_by_one():
+    """Every subset's fit made in forked workers (two) is the one made in the caller: the same
+    spec and, to the last digit, the same parameters, χ² and model; its evaluation, rebuilt in
+    the caller, gives that model again."""
+    from femstudy.diagnosis.diagnose import robust_baseline
+    from femstudy.diagnosis.fitpool import FitPool
+    from femstudy.diagnosis.search import fit_all
+    from femstudy.lanes import can_fork
+
+    if not can_fork():
+        pytest.skip("worker processes are forked on Linux with two or more cores only")
+    rec = synthesize(1.5, 1500, effects=Effects(Noise(0.3, 1.0), SpindleRipple(0.05), None, SensorDrift(0.4, 1.5), None),
+                     seed=5)
+    sim = synthesize(1.5, 1500, effects=Effects.none())
+    problem, _ = build_problem(rec, TraceSimulation.from_recording(sim, 1500), 6.0)
+    with FitPool(problem, workers=2) as pool:
+        assert pool.forked
+    baseline = robust_baseline(problem, align(problem))
+    alone, spread = fit_all(problem, baseline, workers=1), fit_all(problem, baseline, workers=2)
+    assert alone.keys() == spread.keys() and len(alone) == 2 ** 4
+    for subset, f in alone.items():
+        g = spread[subset]
+        assert f.spec == g.spec, subset
+        assert np.array_equal(f.theta, g.theta) and np.array_equal(f.chi2, g.chi2) and np.array_equal(f.model, g.model)
+        assert f.n_params == g.n_params
+        assert np.array_equal(g.evaluation.model, g.model)

@@ -73,7 +73,7 @@ def robust_baseline(problem: Problem, alignment: prepare.Alignment) -> Fit:
     ev = evaluate(problem, spec, lay, theta)
     chi2 = np.array([float(np.sum(problem.whiten(c, problem.y[c] - ev.model[c], problem.usable) ** 2))
                      for c in range(len(problem.channels))])
-    return Fit(spec, lay, theta, chi2, ev.model, float(len(problem.channels) + 1), ev)
+    return Fit(spec, lay, theta, chi2, ev.model, float(len(problem.channels) + 1), lambda: ev)
 
 
 def scale_helps(problem: Problem, f: Fit, inflation: np.ndarray) -> bool:

@@ -16,7 +16,9 @@ the cost of the mechanisms' scanned settings (a frequency searched over a range:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import functools
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -38,7 +40,8 @@ DAMPING = 1e-7
 @dataclass(frozen=True)
 class Fit:
     """One model's optimum: the spec, its parameters, χ² per channel over the fitted rows, the
-    smoothed model at every instant, and its size."""
+    smoothed model at every instant, and its size; ``evaluation`` (the model with its
+    derivatives at the optimum) is built by ``evaluated`` when first read."""
 
     spec: Spec
     layout: ParameterLayout
@@ -46,7 +49,11 @@ class Fit:
     chi2: np.ndarray
     model: np.ndarray
     n_params: float
-    evaluation: Evaluation
+    evaluated: Callable[[], Evaluation] = field(repr=False, compare=False)
+
+    @functools.cached_property
+    def evaluation(self) -> Evaluation:
+        return self.evaluated()
 
     @property
     def subset(self) -> frozenset:
@@ -129,4 +136,4 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
     active = lay.counted_when_active & (theta > np.where(lay.counted_when_active, lay.lower, 0.0) + 1e-12)
     counted = np.count_nonzero(~lay.counted_when_active & free) + np.count_nonzero(active & free)
     return Fit(spec, lay, theta, chi2_channels, ev.model, float(counted + np.count_nonzero(~free)) + lay.scanned,
-               ev)
+               lambda: ev)

@@ -19,6 +19,7 @@ import math
 
 from femstudy.diagnosis.catalogue import MECHANISMS, Variant, in_order
 from femstudy.diagnosis.fit import Fit, fit
+from femstudy.diagnosis.fitpool import FitPool
 from femstudy.diagnosis.model import Spec
 from femstudy.diagnosis.problem import Problem
 
@@ -48,22 +49,26 @@ def _distinct(variants: list[Variant]) -> list[Variant]:
     return out[:MAX_SCANNED]
 
 
-def candidates(problem: Problem, baseline: Fit) -> dict[str, list[Variant]]:
+def candidates(problem: Problem, baseline: Fit, pool: FitPool | None = None) -> dict[str, list[Variant]]:
     """Each available mechanism's candidate variants (items 1 and 2 of the module docstring)."""
+    pool = FitPool(problem, workers=1) if pool is None else pool
     available = [m for m in MECHANISMS.values() if m.available(problem)]
     fixed = [m for m in available if not m.scans]
     options = {m.name: m.variants(problem, None, None) for m in fixed}
     richest = {m.name: options[m.name][-1] for m in fixed}
 
-    def together(choice: dict) -> Fit:
-        return fit(problem, Spec(tuple((m.name, choice[m.name]) for m in fixed)))
+    def together(choice: dict) -> Spec:
+        return Spec(tuple((m.name, choice[m.name]) for m in fixed))
 
-    full = best = together(richest) if fixed else None
+    alternatives = [together({**richest, m.name: variant}) for m in fixed for variant in options[m.name][:-1]]
+    fitted = pool.fit_many([(spec, None) for spec in [together(richest)] + alternatives] if fixed else [])
+    full = best = fitted[0] if fixed else None
+    fitted_alternatives = iter(fitted[1:])   # in the order of ``alternatives``
     out = {}
     for m in fixed:
         chosen, chosen_bic = richest[m.name], bic(problem, full)
         for variant in options[m.name][:-1]:
-            f = together({**richest, m.name: variant})
+            f = next(fitted_alternatives)
             if bic(problem, f) < chosen_bic:
                 chosen, chosen_bic = variant, bic(problem, f)
             if bic(problem, f) < bic(problem, best):
@@ -78,21 +83,23 @@ def candidates(problem: Problem, baseline: Fit) -> dict[str, list[Variant]]:
     return {name: variants for name, variants in out.items() if variants}
 
 
-def fit_all(problem: Problem, baseline: Fit) -> dict[frozenset, Fit]:
-    """The best fit of every subset (item 3 of the module docstring), by frozenset of names."""
-    options = candidates(problem, baseline)
-    names = list(options)
-    fits: dict[frozenset, Fit] = {frozenset(): baseline_fit(problem)}
-    for size in range(1, len(names) + 1):
-        for subset in itertools.combinations(names, size):
-            key = frozenset(subset)
-            start = _start(fits, key)
-            best = None
-            for combo in itertools.product(*(options[n] for n in subset)):
-                f = fit(problem, Spec(tuple(zip(subset, combo))), start)
-                if best is None or bic(problem, f) < bic(problem, best):
-                    best = f
-            fits[key] = best
+def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict[frozenset, Fit]:
+    """The best fit of every subset (item 3 of the module docstring), by frozenset of names;
+    ``workers``: processes the independent fits are spread over (default: one per core)."""
+    with FitPool(problem, workers) as pool:
+        options = candidates(problem, baseline, pool)
+        names = list(options)
+        fits: dict[frozenset, Fit] = {frozenset(): baseline_fit(problem)}
+        for size in range(1, len(names) + 1):
+            tasks = []
+            for subset in itertools.combinations(names, size):
+                start = _start(fits, frozenset(subset))
+                tasks += [(frozenset(subset), Spec(tuple(zip(subset, combo))), start)
+                          for combo in itertools.product(*(options[n] for n in subset))]
+            fitted = pool.fit_many([(spec, start) for _, spec, start in tasks])
+            for (subset, _, _), f in zip(tasks, fitted):   # the first of equal BICs, as one by one
+                if subset not in fits or bic(problem, f) < bic(problem, fits[subset]):
+                    fits[subset] = f
     return fits
 
 
