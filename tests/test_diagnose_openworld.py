@@ -93,3 +93,24 @@ def test_a_mechanism_a_shape_takes_most_of_is_not_named(tmp_path, monkeypatch):
     assert overlapping(kept.unexplained, kept.case["decoy"])
     monkeypatch.setattr(verdict, "BESIDE_SIZE_SHARE", 0.0)
     assert "chip_clogging" in diagnose_case(truth).named
+
+
+def test_the_diagnosis_is_the_same_with_its_fits_and_scans_in_worker_processes_or_not(tmp_path, monkeypatch):
+    """The spindle slowdown above goes through every step that runs in worker processes: the
+    subsets' fits, the scans of the smaller subsets' residuals for competing shapes, the refits
+    with a shape, and the mechanisms refitted beside it. With forking off (everything in the
+    caller) the diagnosis's JSON is the same, all but its wall time."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from bench.formbench.score import diagnose_case
+    from femstudy.diagnosis import fitpool
+    from femstudy.lanes import can_fork
+
+    if not can_fork():
+        pytest.skip("worker processes are forked on Linux with two or more cores only")
+    case = make_formbench_case("decoy:spindle_slowdown", 120_003, "tuning", tmp_path)
+    truth = tmp_path / f"{case.name}.truth.json"
+    spread = diagnose_case(truth).result
+    monkeypatch.setattr(fitpool, "can_fork", lambda: False)
+    alone = diagnose_case(truth).result
+    assert spread.pop("seconds") > 0 and alone.pop("seconds") > 0
+    assert spread == alone

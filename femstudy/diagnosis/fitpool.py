@@ -1,4 +1,4 @@
-"""Many fits of one problem at once, spread over the cores this process may use.
+"""Many fits (or other work) on one problem at once, spread over the cores this process may use.
 
 The search (:mod:`.search`) fits every subset of the catalogue in every combination of its
 members' candidates; the fits of one subset size depend only on the smaller ones, so each size's
@@ -10,7 +10,8 @@ again when its evaluation is first read. A fit is single-threaded and determinis
 and the diagnosis, are the same to the last digit as one by one in the caller — which is what
 happens where forking is not safe (:func:`femstudy.lanes.can_fork`: not on Linux, one core,
 inside a pool worker), for a single fit, with ``workers=1``, and (with a warning) when a worker
-dies.
+dies. The verdict (:mod:`.verdict`) sends its scans for competing shapes and its refits with them
+the same way.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from functools import partial
+from typing import Callable
 
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.model import Spec, evaluate, layout
@@ -28,7 +30,7 @@ from femstudy.lanes import can_fork, cores
 
 log = logging.getLogger(__name__)
 
-#: The problem a worker fits (given at its fork, never pickled).
+#: The problem a worker works on (given at its fork, never pickled).
 _PROBLEM: Problem | None = None
 
 
@@ -37,15 +39,32 @@ def _hold(problem: Problem) -> None:
     _PROBLEM = problem
 
 
-def _fit_one(task: tuple[Spec, dict]) -> tuple:
+def _apply(task: tuple[Callable, object]):
+    fn, item = task
+    return fn(_PROBLEM, item)
+
+
+def portable(f: Fit) -> tuple:
+    """What a worker sends back of a fit, or is sent of one: (spec, parameters, χ², model, size)."""
+    return f.spec, f.theta, f.chi2, f.model, f.n_params
+
+
+def restored(problem: Problem, sent: tuple) -> Fit:
+    """The fit of :func:`portable`'s tuple, its evaluation rebuilt when first read."""
+    spec, theta, chi2, model, n_params = sent
+    lay = layout(problem, spec)
+    return Fit(spec, lay, theta, chi2, model, n_params, partial(evaluate, problem, spec, lay, theta))
+
+
+def _optimum(problem: Problem, task: tuple[Spec, dict]) -> tuple:
     spec, start = task
-    f = fit(_PROBLEM, spec, start)
-    return f.theta, f.chi2, f.model, f.n_params
+    return portable(fit(problem, spec, start))
 
 
 class FitPool:
     """``with FitPool(problem) as pool: fits = pool.fit_many([(spec, start), ...])``: the fits
-    in the order of the tasks, as :func:`.fit.fit` would give them one by one."""
+    in the order of the tasks, as :func:`.fit.fit` would give them one by one; ``pool.run(fn,
+    items)``: ``fn(problem, item)`` for each item, in order."""
 
     def __init__(self, problem: Problem, workers: int | None = None):
         self.problem = problem
@@ -65,22 +84,24 @@ class FitPool:
 
     @property
     def forked(self) -> bool:
-        """Whether the fits go to worker processes (inside the block)."""
+        """Whether the work goes to worker processes (inside the block)."""
         return self._executor is not None
+
+    def run(self, fn: Callable, items: list) -> list:
+        """``fn(problem, item)`` for each item, in order; ``fn`` is sent by its name (a function
+        defined at a module's top level) and its results come back pickled."""
+        if self._executor is None or len(items) < 2:
+            return [fn(self.problem, item) for item in items]
+        try:
+            return list(self._executor.map(_apply, [(fn, item) for item in items]))
+        except (BrokenProcessPool, OSError) as exc:   # a worker killed, or no process left to fork
+            log.warning("working in this process only: a worker process failed (%s)", exc)
+            self._executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
+            return self.run(fn, items)
 
     def fit_many(self, tasks: list[tuple[Spec, dict]]) -> list[Fit]:
         """Each (spec, start) fitted (:func:`.fit.fit` with that start)."""
         if self._executor is None or len(tasks) < 2:
             return [fit(self.problem, spec, start) for spec, start in tasks]
-        try:
-            optima = list(self._executor.map(_fit_one, tasks))
-        except (BrokenProcessPool, OSError) as exc:   # a worker killed, or no process left to fork
-            log.warning("fitting in this process only: a fitting worker failed (%s)", exc)
-            self._executor.shutdown(wait=False, cancel_futures=True)
-            self._executor = None
-            return self.fit_many(tasks)
-        out = []
-        for (spec, _), (theta, chi2, model, n_params) in zip(tasks, optima):
-            lay = layout(self.problem, spec)
-            out.append(Fit(spec, lay, theta, chi2, model, n_params, partial(evaluate, self.problem, spec, lay, theta)))
-        return out
+        return [restored(self.problem, sent) for sent in self.run(_optimum, tasks)]

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 from femstudy.diagnosis import outside
 from femstudy.diagnosis.catalogue import MECHANISMS, in_order
-from femstudy.diagnosis.fit import Fit, fit
+from femstudy.diagnosis.fit import Fit
+from femstudy.diagnosis.fitpool import FitPool, portable, restored
 from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.select import MIN_DELTA_BIC, Dropped, information, n_eff
 
@@ -50,60 +51,67 @@ class Verdict:
     replacement_margin: dict[str, float]    #: per named mechanism, how far the best replacement fell short (BIC)
 
 
-def _with_shape(problem: Problem, f: Fit, shape: outside.Shape) -> Fit:
-    return fit(problem, f.spec.with_extra(shape.free_columns()), f.params())
+def _competitors(problem: Problem, sent: tuple) -> list[outside.Shape]:
+    """The competing shapes on the residual of a fit sent as :func:`.fitpool.portable`."""
+    f = restored(problem, sent)
+    return outside.competitors(problem, f, problem.y - f.model)
 
 
-def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation) -> tuple[frozenset, tuple, dict]:
+def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation,
+                      workers: int | None = None) -> tuple[frozenset, tuple, dict]:
     """Item 2 of the module: the subset left once shapes have replaced what they explain better,
-    the replacements, and per kept mechanism the margin by which its best replacement failed."""
+    the replacements, and per kept mechanism the margin by which its best replacement failed.
+    The scans of the smaller subsets' residuals, and the refits with their shapes, run side by
+    side (:class:`.fitpool.FitPool` of ``workers`` processes, default one per core)."""
     replaced: list[Dropped] = []
     margins: dict[str, float] = {}
 
     def bic(f: Fit, shape: outside.Shape) -> float:
         return information(problem, f, inflation) + shape.scanned * math.log(n_eff(problem))
 
-    while subset:
-        full = information(problem, fits[subset], inflation)
-        tried = []
-        for size in range(len(subset)):
-            for kept in itertools.combinations(sorted(subset), size):
-                kept = frozenset(kept)
-                for shape in outside.competitors(problem, fits[kept], problem.y - fits[kept].model):
-                    tried.append((kept, shape))
-        scored = sorted(((bic(_with_shape(problem, fits[kept], shape), shape), kept, shape) for kept, shape in tried),
-                        key=lambda b: b[0])
-        for m in in_order(subset):
-            alternatives = [b for b, kept, _ in scored if m not in kept]
-            if alternatives:
-                margins[m] = min(alternatives) - full
-        best = next(((b, kept, shape) for b, kept, shape in scored if full - b >= MIN_DELTA_BIC), None)
-        if best is None:
-            break
-        replaced_bic, kept, shape = best
-        beside = _with_shape(problem, fits[subset], shape)
-        reference = bic(beside, shape)
-        standing = set(kept)
-        needed = max(MIN_DELTA_BIC, BESIDE_SHARE * (full - replaced_bic))
-        for m in in_order(subset - kept):   # still needed beside the shape, and of a size that counts?
-            without = _with_shape(problem, fits[subset - {m}], shape)
-            size = MECHANISMS[m].size(problem, beside)
-            if (bic(without, shape) - reference >= needed and size >= MECHANISMS[m].floor
-                    and size >= BESIDE_SIZE_SHARE * MECHANISMS[m].size(problem, fits[subset])):
-                standing.add(m)
-        if standing == set(subset):
-            break   # the shape is needed beside every mechanism: they stand, it is reported
-        kind, channel, _ = outside.describe(problem, shape)
-        for m in in_order(subset - standing):
-            replaced.append(Dropped(m, f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its place "
-                                       f"(BIC lower by {full - replaced_bic:.1f})"))
-        subset = frozenset(standing)
+    with FitPool(problem, workers) as pool:
+        while subset:
+            full = information(problem, fits[subset], inflation)
+            smaller = [frozenset(kept) for size in range(len(subset))
+                       for kept in itertools.combinations(sorted(subset), size)]
+            found = pool.run(_competitors, [portable(fits[kept]) for kept in smaller])
+            tried = [(kept, shape) for kept, shapes in zip(smaller, found) for shape in shapes]
+            refits = pool.fit_many([(fits[kept].spec.with_extra(shape.free_columns()), fits[kept].params())
+                                    for kept, shape in tried])
+            scored = sorted(((bic(f, shape), kept, shape) for (kept, shape), f in zip(tried, refits)),
+                            key=lambda b: b[0])
+            for m in in_order(subset):
+                alternatives = [b for b, kept, _ in scored if m not in kept]
+                if alternatives:
+                    margins[m] = min(alternatives) - full
+            best = next(((b, kept, shape) for b, kept, shape in scored if full - b >= MIN_DELTA_BIC), None)
+            if best is None:
+                break
+            replaced_bic, kept, shape = best
+            doubtful = in_order(subset - kept)
+            beside, *withouts = pool.fit_many([(f.spec.with_extra(shape.free_columns()), f.params())
+                                               for f in [fits[subset]] + [fits[subset - {m}] for m in doubtful]])
+            reference = bic(beside, shape)
+            standing = set(kept)
+            needed = max(MIN_DELTA_BIC, BESIDE_SHARE * (full - replaced_bic))
+            for m, without in zip(doubtful, withouts):   # still needed beside the shape, and of a size that counts?
+                size = MECHANISMS[m].size(problem, beside)
+                if (bic(without, shape) - reference >= needed and size >= MECHANISMS[m].floor
+                        and size >= BESIDE_SIZE_SHARE * MECHANISMS[m].size(problem, fits[subset])):
+                    standing.add(m)
+            if standing == set(subset):
+                break   # the shape is needed beside every mechanism: they stand, it is reported
+            kind, channel, _ = outside.describe(problem, shape)
+            for m in in_order(subset - standing):
+                replaced.append(Dropped(m, f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its "
+                                           f"place (BIC lower by {full - replaced_bic:.1f})"))
+            subset = frozenset(standing)
     return subset, tuple(replaced), {m: v for m, v in margins.items() if m in subset}
 
 
-def decide(problem: Problem, fits: dict, subset: frozenset, inflation) -> Verdict:
-    """Items 2 and 3 of the module."""
-    subset, replaced, margins = replace_by_shapes(problem, fits, subset, inflation)
+def decide(problem: Problem, fits: dict, subset: frozenset, inflation, workers: int | None = None) -> Verdict:
+    """Items 2 and 3 of the module (``workers``: see :func:`replace_by_shapes`)."""
+    subset, replaced, margins = replace_by_shapes(problem, fits, subset, inflation, workers)
     f = fits[subset]
     found = outside.characterise(problem, f, problem.y - f.model)
     return Verdict(subset, f, tuple(found), replaced, margins)
