@@ -57,6 +57,16 @@ def test_pulsation_and_clogging_found_against_an_allotta_trace_on_another_time_b
     assert json.loads((report / "diagnosis.json").read_text())["missing_physics"] == js["missing_physics"]
 
 
+def test_one_worker_process_or_one_per_core_gives_the_same_diagnosis(files, tmp_path):
+    """``--workers 1`` makes every fit in the command's own process; the default spreads them
+    over the cores (§7 of docs/diagnosis.md). The JSON is the same but for the wall time."""
+    _, spread = diagnose_json(tmp_path, files / "rec.csv", "--simulation", files / "allotta.csv", "--quiet")
+    _, alone = diagnose_json(tmp_path, files / "rec.csv", "--simulation", files / "allotta.csv", "--quiet",
+                             "--workers", "1")
+    spread.pop("seconds"), alone.pop("seconds")
+    assert spread == alone and spread["missing_physics"]
+
+
 def test_complete_simulation_reports_nothing(files, tmp_path):
     proc, js = diagnose_json(tmp_path, files / "quiet.csv", "--simulation", files / "clogging.csv", "--quiet")
     assert js["missing_physics"] == [] and js["mismatch"] == []
@@ -86,6 +96,7 @@ def _bad_files(folder):
     (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--plot", "{out}.txt"], "--plot must end in"),
     (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--bone", "goat"], "unknown bone coefficient set"),
     (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--set", "feed_mm_s"], "--set expects KEY=VALUE"),
+    (["{f}/quiet.csv", "--simulation", "{f}/clogging.csv", "--workers", "0"], "argument --workers: 0 is out of range"),
 ])
 def test_bad_input_is_one_line_exit_2_and_writes_nothing(files, tmp_path, args, message):
     if not (files / "short.csv").exists():

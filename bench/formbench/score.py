@@ -86,8 +86,9 @@ def _cpu_seconds() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
-def diagnose_case(truth_path: Path) -> Outcome:
-    """The command on one case (its ``.truth.json``), and its JSON read back."""
+def diagnose_case(truth_path: Path, workers: int | None = None) -> Outcome:
+    """The command on one case (its ``.truth.json``), and its JSON read back; ``workers``: the
+    command's ``--workers`` (default: its own, one per core)."""
     from femstudy.cli import main
 
     case = json.loads(truth_path.read_text())
@@ -98,7 +99,7 @@ def diagnose_case(truth_path: Path) -> Outcome:
     start, cpu = time.perf_counter(), _cpu_seconds()
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(stderr):
         status = main(["diagnose", str(folder / case["recording"]), "--simulation", str(folder / case["simulation"]),
-                       "--json", str(out), "--quiet"])
+                       "--json", str(out), "--quiet"] + ([] if workers is None else ["--workers", str(workers)]))
     seconds, cpu = time.perf_counter() - start, _cpu_seconds() - cpu
     if status != 0:
         return Outcome(case, stderr.getvalue().strip() or f"exit {status}", {}, [], None, seconds, cpu)

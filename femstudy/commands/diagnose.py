@@ -38,9 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--report", type=Path, metavar="DIR",
                    help="write report.md, overlay.png, residuals.png and diagnosis.json to DIR")
     p.add_argument("--plot", type=Path, metavar="OUT.png", help="write the overlay and residual figure")
-    # each fit takes milliseconds and the diagnosis runs in one process; the option of earlier
-    # versions is still accepted so that scripts passing it keep working
-    p.add_argument("--workers", type=number(1, 256, integer=True, low_open=False), default=1, help=argparse.SUPPRESS)
+    p.add_argument("--workers", type=number(1, 256, integer=True, low_open=False),
+                   help="processes the fits are spread over (default: one per core; 1: all in this one)")
     p.add_argument("--quiet", action="store_true", help="no progress messages")
     p.set_defaults(run=run)
 
@@ -64,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         check_recording_size(path, MAX_ANALYSED_SAMPLES, "diagnose")
     d = diagnose(args.recording, args.simulation, args.cortex_mm, args.bone, model=args.model,
                  columns=args.columns, overrides=parse_settings(args.set), override_header=args.override,
-                 bone_library=args.settings.bones_dir)
+                 bone_library=args.settings.bones_dir, workers=args.workers)
     _require_finite(d.to_json(), args.recording.name)
     print(d.summary())
     for path in d.write(args.json, args.plot, args.report):

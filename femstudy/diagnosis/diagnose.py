@@ -184,8 +184,8 @@ def _excess(problem: Problem, f: Fit) -> float:
     return max(f.chi2_total * problem.n_eff_factor - (problem.n * problem.n_eff_factor - f.n_params), 0.0)
 
 
-def _fit_and_select(problem: Problem, baseline: Fit):
-    fits = fit_all(problem, baseline)
+def _fit_and_select(problem: Problem, baseline: Fit, workers: int | None):
+    fits = fit_all(problem, baseline, workers)
     return fits, select(problem, fits)
 
 
@@ -214,7 +214,7 @@ def _failed_signatures(problem: Problem, selection) -> list[outside.Unexplained]
 
 def diagnose(recording, simulation=None, cortex_mm: float | None = None, bone: str | BoneSet = "bovine",
              progress=None, *, model: str | None = None, columns=None, overrides: dict | None = None,
-             override_header: bool = False, bone_library: Path | None = None) -> Diagnosis:
+             override_header: bool = False, bone_library: Path | None = None, workers: int | None = None) -> Diagnosis:
     """Diagnose ``recording`` against a simulation (see the module docstring).
 
     Parameters
@@ -232,6 +232,8 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None, bone: s
     progress : optional callable taking one message per step (they also go to the logger).
     model : "allotta" or "clogging": diagnose against that femstudy load model instead, started at
         the recording's detected contact.
+    workers : processes the independent fits and scans are spread over (default: one per core;
+        1: all in this process); the diagnosis is the same whatever the number.
 
     Returns
     -------
@@ -244,11 +246,11 @@ def diagnose(recording, simulation=None, cortex_mm: float | None = None, bone: s
     """
     with threadpool_limits(1):   # small matrices: BLAS threads only add overhead (3x on two busy cores)
         return _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, overrides, override_header,
-                         bone_library)
+                         bone_library, workers)
 
 
 def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, overrides, override_header,
-              bone_library) -> Diagnosis:
+              bone_library, workers) -> Diagnosis:
     start = time.perf_counter()
 
     def say(message: str) -> None:
@@ -283,7 +285,7 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
                       key=lambda m: (m.start_s, m.channel))
     say(f"aligned (shift {alignment.shift_s * 1e3:+.0f} ms); {len(mismatch)} mismatch interval(s); "
         f"{len(stretches.events)} event(s) in air")
-    fits, selection = _fit_and_select(problem, baseline)
+    fits, selection = _fit_and_select(problem, baseline, workers)
     say(f"fitted {len(fits)} mechanism subsets")
     if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
                                                         for f in (fits[selection.subset], baseline)):
@@ -291,13 +293,13 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
         if not rescaling_may_reach_noise(scaled, fits):
             say("the simulated loads rescaled would still leave more than noise: not refitted")
         else:
-            scaled_fits, scaled_selection = _fit_and_select(scaled, robust_baseline(scaled, alignment))
+            scaled_fits, scaled_selection = _fit_and_select(scaled, robust_baseline(scaled, alignment), workers)
             if (bic(scaled, scaled_fits[scaled_selection.subset]) < bic(problem, fits[selection.subset]) - MIN_DELTA_BIC
                     and scaled_selection.residual_p_value > RESIDUAL_P):
                 problem, fits, selection = scaled, scaled_fits, scaled_selection
                 baseline = robust_baseline(problem, alignment)
             say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
-    verdict = decide(problem, fits, selection.subset, selection.inflation)
+    verdict = decide(problem, fits, selection.subset, selection.inflation, workers)
     improved = verdict.fit
     frame = improved.evaluation.frame
     span = (frame.contact_t_s, min(frame.stop_t_s, float(t[-1])))
