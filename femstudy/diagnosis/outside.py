@@ -160,43 +160,52 @@ def _scan(problem: Problem, ctx: Context, residuals: list, loads: np.ndarray, ki
                  gain, shape.interval(ctx, candidates[j]), k, shape.scanned)
 
 
-def shapes(problem: Problem, f: Fit, residuals: list[np.ndarray], kinds=None, one_channel_only: tuple = ()) -> list[Shape]:
+def _best_of_kind(problem: Problem, item: tuple) -> Shape | None:
+    """The best candidate of one kind (:func:`shapes`); ``item`` = (context, residuals, loads,
+    kind, one channel only)."""
+    ctx, residuals, loads, kind, one_channel = item
+    shape = SHAPES[kind]
+    candidates = shape.candidates(ctx)
+    if not candidates:
+        return None
+    best = _scan(problem, ctx, residuals, loads, kind, candidates, one_channel, len(candidates))
+    tries = len(candidates)
+    for _ in range(REFINEMENTS):
+        local = shape.refine(ctx, best.parameters)
+        if not local:
+            break
+        tries += len(local)
+        finer = _scan(problem, ctx, residuals, loads, kind, local, one_channel, tries)
+        if finer.gain <= best.gain:
+            break
+        best = finer
+    return best
+
+
+def shapes(problem: Problem, f: Fit, residuals: list[np.ndarray], kinds=None, one_channel_only: tuple = (),
+           pool=None) -> list[Shape]:
     """The best candidate of each kind on ``residuals`` (best channel variant), for ``kinds`` (default
-    all); kinds in ``one_channel_only`` may use one channel only."""
+    all); kinds in ``one_channel_only`` may use one channel only. With a :class:`.fitpool.FitPool`
+    the kinds are scanned side by side."""
     ctx = context(problem, f)
     loads = f.evaluation.loads
-    out = []
-    for kind, shape in SHAPES.items():
-        if kinds is not None and kind not in kinds:
-            continue
-        candidates = shape.candidates(ctx)
-        if not candidates:
-            continue
-        best = _scan(problem, ctx, residuals, loads, kind, candidates, kind in one_channel_only, len(candidates))
-        tries = len(candidates)
-        for _ in range(REFINEMENTS):
-            local = shape.refine(ctx, best.parameters)
-            if not local:
-                break
-            tries += len(local)
-            finer = _scan(problem, ctx, residuals, loads, kind, local, kind in one_channel_only, tries)
-            if finer.gain <= best.gain:
-                break
-            best = finer
-        out.append(best)
-    return out
+    items = [(ctx, residuals, loads, kind, kind in one_channel_only) for kind in SHAPES
+             if kinds is None or kind in kinds]
+    found = pool.run(_best_of_kind, items) if pool is not None else [_best_of_kind(problem, i) for i in items]
+    return [s for s in found if s is not None]
 
 
 def material(shape: Shape) -> bool:
     return shape.gain >= MIN_GAIN and shape.size >= SHAPES[shape.kind].min_size
 
 
-def characterise(problem: Problem, f: Fit, residual: np.ndarray) -> list[Shape]:
-    """Greedy search of material shapes in ``residual`` (channels × instants)."""
+def characterise(problem: Problem, f: Fit, residual: np.ndarray, pool=None) -> list[Shape]:
+    """Greedy search of material shapes in ``residual`` (channels × instants); ``pool``: see
+    :func:`shapes`."""
     remaining = [residual[c].copy() for c in range(len(problem.channels))]
     found: list[Shape] = []
     for _ in range(MAX_SHAPES):
-        candidates = [s for s in shapes(problem, f, remaining) if material(s)]
+        candidates = [s for s in shapes(problem, f, remaining, pool=pool) if material(s)]
         if not candidates:
             break
         best = max(candidates, key=lambda s: s.gain)

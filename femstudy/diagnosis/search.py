@@ -19,7 +19,7 @@ import math
 
 from femstudy.diagnosis.catalogue import MECHANISMS, Variant, in_order
 from femstudy.diagnosis.fit import Fit, fit
-from femstudy.diagnosis.fitpool import FitPool
+from femstudy.diagnosis.fitpool import FitPool, portable, restored
 from femstudy.diagnosis.model import Spec
 from femstudy.diagnosis.problem import Problem
 
@@ -74,13 +74,20 @@ def candidates(problem: Problem, baseline: Fit, pool: FitPool | None = None) -> 
             if bic(problem, f) < bic(problem, best):
                 best = f
         out[m.name] = [chosen] + ([options[m.name][0]] if options[m.name][0] != chosen else [])
-    for m in available:
-        if m.scans:
-            found = []
-            for base in ([best] if best is not None else []) + [baseline]:
-                found += m.variants(problem, problem.y - base.model, base.evaluation)
-            out[m.name] = _distinct(found)
+    scanning = [m.name for m in available if m.scans]
+    bases = [portable(base) for base in ([best] if best is not None else []) + [baseline]]
+    found = iter(pool.run(_scanned, [(name, base) for name in scanning for base in bases]))
+    for name in scanning:
+        out[name] = _distinct([variant for _ in bases for variant in next(found)])
     return {name: variants for name, variants in out.items() if variants}
+
+
+def _scanned(problem: Problem, item: tuple[str, tuple]) -> list[Variant]:
+    """A scanning mechanism's variants found in the residual of a fit sent as
+    :func:`.fitpool.portable` (item 2 of the module docstring)."""
+    name, sent = item
+    base = restored(problem, sent)
+    return MECHANISMS[name].variants(problem, problem.y - base.model, base.evaluation)
 
 
 def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict[frozenset, Fit]:

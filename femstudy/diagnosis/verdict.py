@@ -58,60 +58,61 @@ def _competitors(problem: Problem, sent: tuple) -> list[outside.Shape]:
 
 
 def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation,
-                      workers: int | None = None) -> tuple[frozenset, tuple, dict]:
+                      pool: FitPool) -> tuple[frozenset, tuple, dict]:
     """Item 2 of the module: the subset left once shapes have replaced what they explain better,
     the replacements, and per kept mechanism the margin by which its best replacement failed.
     The scans of the smaller subsets' residuals, and the refits with their shapes, run side by
-    side (:class:`.fitpool.FitPool` of ``workers`` processes, default one per core)."""
+    side in ``pool``."""
     replaced: list[Dropped] = []
     margins: dict[str, float] = {}
 
     def bic(f: Fit, shape: outside.Shape) -> float:
         return information(problem, f, inflation) + shape.scanned * math.log(n_eff(problem))
 
-    with FitPool(problem, workers) as pool:
-        while subset:
-            full = information(problem, fits[subset], inflation)
-            smaller = [frozenset(kept) for size in range(len(subset))
-                       for kept in itertools.combinations(sorted(subset), size)]
-            found = pool.run(_competitors, [portable(fits[kept]) for kept in smaller])
-            tried = [(kept, shape) for kept, shapes in zip(smaller, found) for shape in shapes]
-            refits = pool.fit_many([(fits[kept].spec.with_extra(shape.free_columns()), fits[kept].params())
-                                    for kept, shape in tried])
-            scored = sorted(((bic(f, shape), kept, shape) for (kept, shape), f in zip(tried, refits)),
-                            key=lambda b: b[0])
-            for m in in_order(subset):
-                alternatives = [b for b, kept, _ in scored if m not in kept]
-                if alternatives:
-                    margins[m] = min(alternatives) - full
-            best = next(((b, kept, shape) for b, kept, shape in scored if full - b >= MIN_DELTA_BIC), None)
-            if best is None:
-                break
-            replaced_bic, kept, shape = best
-            doubtful = in_order(subset - kept)
-            beside, *withouts = pool.fit_many([(f.spec.with_extra(shape.free_columns()), f.params())
-                                               for f in [fits[subset]] + [fits[subset - {m}] for m in doubtful]])
-            reference = bic(beside, shape)
-            standing = set(kept)
-            needed = max(MIN_DELTA_BIC, BESIDE_SHARE * (full - replaced_bic))
-            for m, without in zip(doubtful, withouts):   # still needed beside the shape, and of a size that counts?
-                size = MECHANISMS[m].size(problem, beside)
-                if (bic(without, shape) - reference >= needed and size >= MECHANISMS[m].floor
-                        and size >= BESIDE_SIZE_SHARE * MECHANISMS[m].size(problem, fits[subset])):
-                    standing.add(m)
-            if standing == set(subset):
-                break   # the shape is needed beside every mechanism: they stand, it is reported
-            kind, channel, _ = outside.describe(problem, shape)
-            for m in in_order(subset - standing):
-                replaced.append(Dropped(m, f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its "
-                                           f"place (BIC lower by {full - replaced_bic:.1f})"))
-            subset = frozenset(standing)
+    while subset:
+        full = information(problem, fits[subset], inflation)
+        smaller = [frozenset(kept) for size in range(len(subset))
+                   for kept in itertools.combinations(sorted(subset), size)]
+        found = pool.run(_competitors, [portable(fits[kept]) for kept in smaller])
+        tried = [(kept, shape) for kept, shapes in zip(smaller, found) for shape in shapes]
+        refits = pool.fit_many([(fits[kept].spec.with_extra(shape.free_columns()), fits[kept].params())
+                                for kept, shape in tried])
+        scored = sorted(((bic(f, shape), kept, shape) for (kept, shape), f in zip(tried, refits)),
+                        key=lambda b: b[0])
+        for m in in_order(subset):
+            alternatives = [b for b, kept, _ in scored if m not in kept]
+            if alternatives:
+                margins[m] = min(alternatives) - full
+        best = next(((b, kept, shape) for b, kept, shape in scored if full - b >= MIN_DELTA_BIC), None)
+        if best is None:
+            break
+        replaced_bic, kept, shape = best
+        doubtful = in_order(subset - kept)
+        beside, *withouts = pool.fit_many([(f.spec.with_extra(shape.free_columns()), f.params())
+                                           for f in [fits[subset]] + [fits[subset - {m}] for m in doubtful]])
+        reference = bic(beside, shape)
+        standing = set(kept)
+        needed = max(MIN_DELTA_BIC, BESIDE_SHARE * (full - replaced_bic))
+        for m, without in zip(doubtful, withouts):   # still needed beside the shape, and of a size that counts?
+            size = MECHANISMS[m].size(problem, beside)
+            if (bic(without, shape) - reference >= needed and size >= MECHANISMS[m].floor
+                    and size >= BESIDE_SIZE_SHARE * MECHANISMS[m].size(problem, fits[subset])):
+                standing.add(m)
+        if standing == set(subset):
+            break   # the shape is needed beside every mechanism: they stand, it is reported
+        kind, channel, _ = outside.describe(problem, shape)
+        for m in in_order(subset - standing):
+            replaced.append(Dropped(m, f"a {kind.replace('_', ' ')} ({channel}) explains the data better in its "
+                                       f"place (BIC lower by {full - replaced_bic:.1f})"))
+        subset = frozenset(standing)
     return subset, tuple(replaced), {m: v for m, v in margins.items() if m in subset}
 
 
 def decide(problem: Problem, fits: dict, subset: frozenset, inflation, workers: int | None = None) -> Verdict:
-    """Items 2 and 3 of the module (``workers``: see :func:`replace_by_shapes`)."""
-    subset, replaced, margins = replace_by_shapes(problem, fits, subset, inflation, workers)
-    f = fits[subset]
-    found = outside.characterise(problem, f, problem.y - f.model)
+    """Items 2 and 3 of the module; the independent scans and fits in ``workers`` processes
+    (:class:`.fitpool.FitPool`, default one per core)."""
+    with FitPool(problem, workers) as pool:
+        subset, replaced, margins = replace_by_shapes(problem, fits, subset, inflation, pool)
+        f = fits[subset]
+        found = outside.characterise(problem, f, problem.y - f.model, pool)
     return Verdict(subset, f, tuple(found), replaced, margins)
