@@ -10,8 +10,9 @@ again when its evaluation is first read. A fit is single-threaded and determinis
 and the diagnosis, are the same to the last digit as one by one in the caller — which is what
 happens where forking is not safe (:func:`femstudy.lanes.can_fork`: not on Linux, one core,
 inside a pool worker), for a single fit, with ``workers=1``, and (with a warning) when a worker
-dies. The verdict (:mod:`.verdict`) sends its scans for competing shapes and its refits with them
-the same way.
+dies. Other independent work goes the same way through :meth:`FitPool.run`: the pulsation's
+frequency scans (:mod:`.search`), and the verdict's scans for competing shapes, its refits with
+them and its scans of each kind of shape (:mod:`.verdict`, :mod:`.outside`).
 """
 
 from __future__ import annotations
