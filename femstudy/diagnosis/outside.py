@@ -30,6 +30,7 @@ import numpy as np
 from scipy import signal
 
 from femstudy.diagnosis.fit import Fit
+from femstudy.diagnosis.fitpool import FitPool
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.shapes import SHAPES, WORD, Context
@@ -183,7 +184,7 @@ def _best_of_kind(problem: Problem, item: tuple) -> Shape | None:
 
 
 def shapes(problem: Problem, f: Fit, residuals: list[np.ndarray], kinds=None, one_channel_only: tuple = (),
-           pool=None) -> list[Shape]:
+           pool: FitPool | None = None) -> list[Shape]:
     """The best candidate of each kind on ``residuals`` (best channel variant), for ``kinds`` (default
     all); kinds in ``one_channel_only`` may use one channel only. With a :class:`.fitpool.FitPool`
     the kinds are scanned side by side."""
@@ -191,15 +192,15 @@ def shapes(problem: Problem, f: Fit, residuals: list[np.ndarray], kinds=None, on
     loads = f.evaluation.loads
     items = [(ctx, residuals, loads, kind, kind in one_channel_only) for kind in SHAPES
              if kinds is None or kind in kinds]
-    found = pool.run(_best_of_kind, items) if pool is not None else [_best_of_kind(problem, i) for i in items]
-    return [s for s in found if s is not None]
+    pool = FitPool(problem, workers=1) if pool is None else pool
+    return [s for s in pool.run(_best_of_kind, items) if s is not None]
 
 
 def material(shape: Shape) -> bool:
     return shape.gain >= MIN_GAIN and shape.size >= SHAPES[shape.kind].min_size
 
 
-def characterise(problem: Problem, f: Fit, residual: np.ndarray, pool=None) -> list[Shape]:
+def characterise(problem: Problem, f: Fit, residual: np.ndarray, pool: FitPool | None = None) -> list[Shape]:
     """Greedy search of material shapes in ``residual`` (channels × instants); ``pool``: see
     :func:`shapes`."""
     remaining = [residual[c].copy() for c in range(len(problem.channels))]

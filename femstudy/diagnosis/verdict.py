@@ -51,6 +51,11 @@ class Verdict:
     replacement_margin: dict[str, float]    #: per named mechanism, how far the best replacement fell short (BIC)
 
 
+def _with_shape(f: Fit, shape: outside.Shape) -> tuple:
+    """The task (spec, start) of refitting ``f`` with ``shape``'s columns beside its mechanisms."""
+    return f.spec.with_extra(shape.free_columns()), f.params()
+
+
 def _competitors(problem: Problem, sent: tuple) -> list[outside.Shape]:
     """The competing shapes on the residual of a fit sent as :func:`.fitpool.portable`."""
     f = restored(problem, sent)
@@ -75,8 +80,7 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
                    for kept in itertools.combinations(sorted(subset), size)]
         found = pool.run(_competitors, [portable(fits[kept]) for kept in smaller])
         tried = [(kept, shape) for kept, shapes in zip(smaller, found) for shape in shapes]
-        refits = pool.fit_many([(fits[kept].spec.with_extra(shape.free_columns()), fits[kept].params())
-                                for kept, shape in tried])
+        refits = pool.fit_many([_with_shape(fits[kept], shape) for kept, shape in tried])
         scored = sorted(((bic(f, shape), kept, shape) for (kept, shape), f in zip(tried, refits)),
                         key=lambda b: b[0])
         for m in in_order(subset):
@@ -88,7 +92,7 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
             break
         replaced_bic, kept, shape = best
         doubtful = in_order(subset - kept)
-        beside, *withouts = pool.fit_many([(f.spec.with_extra(shape.free_columns()), f.params())
+        beside, *withouts = pool.fit_many([_with_shape(f, shape)
                                            for f in [fits[subset]] + [fits[subset - {m}] for m in doubtful]])
         reference = bic(beside, shape)
         standing = set(kept)
