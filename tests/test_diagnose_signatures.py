@@ -179,6 +179,55 @@ def test_a_torque_only_loss_is_not_softening():
     assert any(k in ("torque_only", "step") for k in kinds(d))
 
 
+def friction_pair(stays: bool):
+    """A simulation with a chip friction of its own, which after breakthrough stays while the drill
+    feeds (``stays``) or fades with the cone leaving the cortex, and a recording of the same cut
+    whose bone the heat softens by a hyperbolic loss that spares that friction."""
+    cut = synthesize(1.5, 1500, model="allotta", effects=Effects.none(), depth_column=True)
+    noisy = synthesize(1.5, 1500, model="allotta", effects=NUISANCE, seed=24)
+    t, depth, cortex, cone = cut.time_s, cut.depth_mm, 6.0, 1.35
+    column = np.clip((np.minimum(np.maximum.accumulate(depth), cortex) - cone) / (cortex - cone), 0, 1)
+    feeding = np.gradient(depth, t) > 0.5 * 1.5
+    friction = 0.4 * cut.thrust_N.max() * column ** 1.5 * feeding
+    if not stays:
+        friction *= np.clip((cortex + cone - depth) / cone, 0, 1)   # the cone's share still in cortex
+    loss = 1 - 0.3 * (x := np.maximum(t - 2.0, 0) / 2.0) / (1 + x)
+    sim = replace(cut, thrust_N=cut.thrust_N + friction, torque_Nmm=cut.torque_Nmm + 0.5 * friction)
+    rec = replace(noisy, thrust_N=noisy.thrust_N - cut.thrust_N * (1 - loss) + friction,
+                  torque_Nmm=noisy.torque_Nmm - cut.torque_Nmm * (1 - loss) + 0.5 * friction, depth_mm=None)
+    return rec, TraceSimulation.from_recording(sim, 1500)
+
+
+@pytest.mark.parametrize("stays", [True, False])
+def test_softening_is_named_alone_whether_the_simulated_chip_friction_stays_or_fades(stays):
+    """Either way the loss is softening alone, not softening plus a clogging that the other reading
+    of the friction would need, and the fit reads the friction as simulated."""
+    from femstudy.diagnosis.model import friction_stays
+
+    d = diagnose(*friction_pair(stays), 6.0)
+    assert named(d) == {"thermal_softening"}
+    assert friction_stays(d.verdict.fit.spec) == stays
+
+
+def test_the_staying_reading_of_the_friction_only_adds_fits(monkeypatch):
+    """Every subset's fit with the friction read as fading is the one made without the staying
+    reading on offer, bit for bit: that reading adds candidates and changes no other fit."""
+    from femstudy.diagnosis import search
+    from femstudy.diagnosis.catalogue import FRICTION_STAYS, MECHANISMS
+    from femstudy.diagnosis.model import friction_stays
+
+    d = diagnose(*friction_pair(True), 6.0, workers=1)
+    with_it = search.fit_all(d.problem, d.baseline, workers=1)
+    offered = MECHANISMS["thermal_softening"].variants
+    monkeypatch.setattr(MECHANISMS["thermal_softening"], "variants",
+                        lambda *a: [v for v in offered(*a) if not v.get(FRICTION_STAYS)])
+    without = search.fit_all(d.problem, d.baseline, workers=1)
+    assert any(friction_stays(f.spec) for f in with_it.values())
+    for subset, f in with_it.items():
+        if not friction_stays(f.spec):
+            assert f.spec == without[subset].spec and np.array_equal(f.theta, without[subset].theta)
+
+
 def test_a_slow_exit_is_recognised_as_breakthrough():
     """1 mm/s at 800 rpm: the cone leaves the cortex over 1.35 s, some eighteen revolutions; a
     trace whose loads move in steps (lip elements, a mesh) stalls the fall for tens of ms."""

@@ -9,15 +9,16 @@ On the band's model grid t (recording time), for channel c:
   frozen once τ' reaches the simulation's feed stop; after that τ' runs on in real time and the
   loads fall as simulated (what LOAD mechanisms add falls with them);
 - S_c(τ'), the simulated load; R_c the part of it above its value at full engagement S_c,o, while
-  it rises, and the same share of it once it falls (what the simulation's own chip column adds, if
-  it has one: :func:`_rise`); ΔU_c = Σ what LOAD mechanisms add;
+  it rises, and once it falls the same share of it, or the level it reached (:func:`friction_stays`)
+  (what the simulation's own chip column adds, if it has one: :func:`_rise`); ΔU_c = Σ what LOAD
+  mechanisms add;
 - P_c = 1 + Σ m_c in contact, before the stop (FEED mechanisms), else 1;
 - H_c = 1 − Σ s_c (GAIN mechanisms) on the cutting load, and H_ψ = 1 − (1 − ψ) Σ s_c on the
   friction of packed chips (the simulation's rise R and what LOAD mechanisms add): the heat softens
   the bone the lips cut, and may or may not soften that friction, so the share ψ ∈ [0, 1] it spares
   is fitted whenever a GAIN mechanism meets such a friction (:data:`GAIN_SPARES`; counted as a
   parameter only when it leaves 0; R is taken as 0 when the simulation rises by less than
-  :data:`MATERIAL_RISE` of its engaged load);
+  :data:`.problem.MATERIAL_RISE` of its engaged load);
 - A_c = Σ d_c (SENSOR mechanisms); tare_c, the sensor's zero; g_c = 1 unless the calibration scale
   is admitted (:mod:`.diagnose`).
 
@@ -38,13 +39,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from femstudy.diagnosis.baseline import ModelSimulation
-from femstudy.diagnosis.catalogue import MECHANISMS, Layout, Role, Term, Variant
+from femstudy.diagnosis.catalogue import FRICTION_STAYS, MECHANISMS, Layout, Role, Term, Variant
 from femstudy.diagnosis.problem import Problem
 
 #: The share of a GAIN mechanism's loss spared on the friction of packed chips (the parameter ψ).
 GAIN_SPARES = "gain_spares_friction"
-#: A simulation whose thrust rises above its engaged value by less than this share has no rise R.
-MATERIAL_RISE = 0.03
 #: Bounds of the shift correction [s] and of the stop-depth correction [mm].
 SHIFT_RANGE_S = 0.25
 STOP_RANGE_MM = 0.6
@@ -139,7 +138,7 @@ def layout(problem: Problem, spec: Spec) -> ParameterLayout:
             start.append(1.0)
             counted.append(False)
     roles = {MECHANISMS[name].role for name, _ in spec.variants}
-    if Role.GAIN in roles and (Role.LOAD in roles or problem.simulated_rise > MATERIAL_RISE):
+    if Role.GAIN in roles and (Role.LOAD in roles or problem.has_chip_friction):
         names.append(GAIN_SPARES)
         lower.append(0.0)
         upper.append(1.0)
@@ -200,21 +199,33 @@ def _fall(problem: Problem, frame: Frame, thrust: np.ndarray, stop_tau: float) -
     return np.where(after, np.clip(thrust / at_stop, 0.0, 1.0), 1.0)
 
 
-def _rise(S: np.ndarray, engaged: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """R = S·q, q the largest share 1 − S_o/S of the load above its engaged value so far: S − S_o
-    while the load rises, and the same share of the load once it falls (after breakthrough the
-    packed chips' friction leaves with the cut); with q and where the share is rising, from which
-    dR/dτ = dS/dτ while it rises and q dS/dτ after (:func:`_rise_slope`)."""
+def _rise(S: np.ndarray, engaged: np.ndarray, stays: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """R, the simulation's own chip friction: the load above its engaged value S_o while it rises,
+    and dR/dS. Once the load falls (after breakthrough, at the stop) the friction either fades with
+    the cut, R = q S with q the largest share 1 − S_o/S so far (femstudy's clogging model: the
+    packed chips leave with the cone), or, with ``stays``, keeps the level it reached while the
+    load is at least that, R = min(S, level) (the packed chips stay while the drill feeds)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         share = np.where(S > engaged[:, None], 1.0 - engaged[:, None] / S, 0.0)
+    if stays:
+        excess = S * share
+        level = np.maximum.accumulate(excess, axis=1)
+        R = np.minimum(S, level)
+        follows = ((excess >= level) & (excess > 0)) | (S <= level)
+        return R, follows.astype(float)
     held = np.maximum.accumulate(share, axis=1)
     rising = (share >= held) & (share > 0)
-    return S * held, held, rising
+    return S * held, np.where(rising, 1.0, held)
 
 
-def _rise_slope(dS: np.ndarray, held: np.ndarray, rising: np.ndarray) -> np.ndarray:
-    """dR/dτ from dS/dτ and what :func:`_rise` returns."""
-    return np.where(rising, dS, dS * held)
+def friction_stays(spec: Spec) -> bool:
+    """Whether the simulation's chip friction is read as staying after breakthrough: a GAIN
+    mechanism's variant says so (:data:`.catalogue.FRICTION_STAYS`) and no LOAD mechanism is fitted.
+    Beside a LOAD mechanism (a clogging, whose excess may stay or leave after breakthrough) the two
+    readings trade with it, so there the friction fades as simulated by femstudy's own model."""
+    roles = [MECHANISMS[name].role for name, _ in spec.variants]
+    return Role.LOAD not in roles and any(variant.get(FRICTION_STAYS, False) for name, variant in spec.variants
+                                          if MECHANISMS[name].role is Role.GAIN)
 
 
 def _loads(problem: Problem, tau: np.ndarray, stop_tau: float) -> np.ndarray:
@@ -284,10 +295,10 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
     # the simulated load on the drill's clock
     S = _loads(problem, frame.tau, stop_tau)
     frame = replace(frame, fall=_fall(problem, frame, S[0], stop_tau))
-    rise = GAIN_SPARES in lay.names and problem.simulated_rise > MATERIAL_RISE
-    R = np.zeros_like(S)
+    rise = GAIN_SPARES in lay.names and problem.has_chip_friction
+    R, dR_dS = np.zeros_like(S), np.zeros_like(S)
     if rise:
-        R, held, rising = _rise(S, problem.engaged_loads)
+        R, dR_dS = _rise(S, problem.engaged_loads, friction_stays(spec))
     C = np.zeros_like(S)
     for name in lay.blocks:
         if roles[name] is Role.LOAD:
@@ -331,7 +342,7 @@ def evaluate(problem: Problem, spec: Spec, lay: ParameterLayout, theta: np.ndarr
         J = np.zeros((n_ch, n_t, p))
         h = 0.25 * float(t[1] - t[0])
         dS = (_loads(problem, frame.tau + h, stop_tau) - _loads(problem, frame.tau - h, stop_tau)) / (2 * h)
-        dR = _rise_slope(dS, held, rising) if rise else np.zeros_like(S)
+        dR = dR_dS * dS
         dC = np.zeros_like(S)
         for name in lay.blocks:
             if roles[name] is Role.LOAD:

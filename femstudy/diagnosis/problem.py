@@ -16,6 +16,10 @@ from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.noise import Whitener
 from femstudy.drilling.drill import Drill
 
+#: A simulation whose thrust rises above its engaged value by less than this share has no chip
+#: friction of its own (no rise R in the model, :mod:`.model`).
+MATERIAL_RISE = 0.03
+
 
 @dataclass(frozen=True)
 class Geometry:
@@ -136,6 +140,12 @@ class Problem:
         """How far the simulated thrust rises above its engaged value, as a share of it."""
         F = self.simulation.loads(self.band.t_model - self.shift_s, self.stop_s)[0]
         return max(float(np.max(F)) / max(self.engaged_loads[0], 1e-12) - 1.0, 0.0)
+
+    @property
+    def has_chip_friction(self) -> bool:
+        """Whether the simulation has a chip friction of its own: a thrust rising above its engaged
+        value by at least :data:`MATERIAL_RISE` of it."""
+        return self.simulated_rise > MATERIAL_RISE
 
     def peak(self, c: int) -> float:
         """The simulated load's peak on channel ``c`` [N or N·mm]."""

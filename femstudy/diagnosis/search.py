@@ -3,13 +3,18 @@
 1. The mechanisms whose variants are fixed alternatives (a drift's polynomial degree, a monotone
    spline's number of intervals; listed simplest first) are fitted together, each in its richest
    variant; then each mechanism's other variants in turn, the rest left richest. Per mechanism the
-   variant of the lowest BIC and its simplest variant stay candidates.
+   variant of the lowest BIC and its simplest variant stay candidates. A variant that reads the
+   simulated chip friction as staying after breakthrough (:data:`.catalogue.FRICTION_STAYS`) is
+   left out of this step (beside a clogging the friction is read as fading whatever the variant
+   says, :func:`.model.friction_stays`) and is a candidate as offered.
 2. A mechanism whose variants come from a scan (a feed pulsation's frequency) scans the residual
    of that fit and of the simulation alone; the distinct frequencies found, at most
    :data:`MAX_SCANNED` of them, are its candidates.
 3. Every subset (2⁴ = 16 with the four mechanisms) is fitted in every combination of its members'
-   candidates, each started from the best fit of the subsets one mechanism smaller; the
-   combination with the lowest BIC (on the data's own noise level) is the subset's fit.
+   candidates that is a distinct model, each started from the best fit of the subsets one
+   mechanism smaller (with the friction read as fading, from the best such fit: the staying reading
+   adds fits and changes none of the others); the combination with the lowest BIC (on the data's
+   own noise level) is the subset's fit.
 """
 
 from __future__ import annotations
@@ -17,10 +22,10 @@ from __future__ import annotations
 import itertools
 import math
 
-from femstudy.diagnosis.catalogue import MECHANISMS, Variant, in_order
+from femstudy.diagnosis.catalogue import FRICTION_STAYS, MECHANISMS, Variant, in_order
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.fitpool import FitPool, portable, restored
-from femstudy.diagnosis.model import Spec
+from femstudy.diagnosis.model import Spec, friction_stays
 from femstudy.diagnosis.problem import Problem
 
 #: Most scanned variants (frequencies) tried per mechanism.
@@ -49,12 +54,32 @@ def _distinct(variants: list[Variant]) -> list[Variant]:
     return out[:MAX_SCANNED]
 
 
+def _model_key(spec: Spec) -> tuple:
+    """What makes ``spec``'s model: its variants' settings, without a chip friction read as
+    staying where the model reads it as fading anyway (:func:`.model.friction_stays`)."""
+    stays = friction_stays(spec)
+    return tuple((name, tuple(kv for kv in v.settings if stays or kv[0] != FRICTION_STAYS))
+                 for name, v in spec.variants)
+
+
+def _distinct_models(specs: list[Spec]) -> list[Spec]:
+    """``specs`` without those that are the same model as an earlier one (:func:`_model_key`)."""
+    seen, out = set(), []
+    for spec in specs:
+        if _model_key(spec) not in seen:
+            seen.add(_model_key(spec))
+            out.append(spec)
+    return out
+
+
 def candidates(problem: Problem, baseline: Fit, pool: FitPool | None = None) -> dict[str, list[Variant]]:
     """Each available mechanism's candidate variants (items 1 and 2 of the module docstring)."""
     pool = FitPool(problem, workers=1) if pool is None else pool
     available = [m for m in MECHANISMS.values() if m.available(problem)]
     fixed = [m for m in available if not m.scans]
-    options = {m.name: m.variants(problem, None, None) for m in fixed}
+    offered = {m.name: m.variants(problem, None, None) for m in fixed}
+    options = {name: [v for v in variants if not v.get(FRICTION_STAYS)] for name, variants in offered.items()}
+    staying = {name: [v for v in variants if v.get(FRICTION_STAYS)] for name, variants in offered.items()}
     richest = {m.name: options[m.name][-1] for m in fixed}
 
     def together(choice: dict) -> Spec:
@@ -73,7 +98,7 @@ def candidates(problem: Problem, baseline: Fit, pool: FitPool | None = None) -> 
                 chosen, chosen_bic = variant, bic(problem, f)
             if bic(problem, f) < bic(problem, best):
                 best = f
-        out[m.name] = [chosen] + ([options[m.name][0]] if options[m.name][0] != chosen else [])
+        out[m.name] = [chosen] + ([options[m.name][0]] if options[m.name][0] != chosen else []) + staying[m.name]
     scanning = [m.name for m in available if m.scans]
     bases = [portable(base) for base in ([best] if best is not None else []) + [baseline]]
     found = iter(pool.run(_scanned, [(name, base) for name in scanning for base in bases]))
@@ -97,16 +122,18 @@ def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict
         options = candidates(problem, baseline, pool)
         names = list(options)
         fits: dict[frozenset, Fit] = {frozenset(): baseline_fit(problem)}
+        fading = dict(fits)   # the best fits with the simulated chip friction read as fading
         for size in range(1, len(names) + 1):
             tasks = []
             for subset in itertools.combinations(names, size):
-                start = _start(fits, frozenset(subset))
-                tasks += [(frozenset(subset), Spec(tuple(zip(subset, combo))), start)
-                          for combo in itertools.product(*(options[n] for n in subset))]
+                specs = [Spec(tuple(zip(subset, combo))) for combo in itertools.product(*(options[n] for n in subset))]
+                tasks += [(frozenset(subset), spec, _start(fits if friction_stays(spec) else fading, frozenset(subset)))
+                          for spec in _distinct_models(specs)]
             fitted = pool.fit_many([(spec, start) for _, spec, start in tasks])
-            for (subset, _, _), f in zip(tasks, fitted):   # the first of equal BICs, as one by one
-                if subset not in fits or bic(problem, f) < bic(problem, fits[subset]):
-                    fits[subset] = f
+            for (subset, spec, _), f in zip(tasks, fitted):   # the first of equal BICs, as one by one
+                for kept in (fits, fading) if not friction_stays(spec) else (fits,):
+                    if subset not in kept or bic(problem, f) < bic(problem, kept[subset]):
+                        kept[subset] = f
     return fits
 
 

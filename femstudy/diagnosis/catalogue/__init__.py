@@ -18,11 +18,11 @@ Adding a mechanism is one new module in this package that calls :func:`register`
 imported when the package is.
 """
 
-from femstudy.diagnosis.catalogue.registry import (MECHANISMS, Check, Layout, Mechanism, Parameter, Reading, Role,
-                                                   Term, Variant, in_order, names, register)
+from femstudy.diagnosis.catalogue.registry import (FRICTION_STAYS, MECHANISMS, Check, Layout, Mechanism, Parameter,
+                                                   Reading, Role, Term, Variant, in_order, names, register)
 from femstudy.plugins import import_modules
 
-__all__ = ["MECHANISMS", "Check", "Layout", "Mechanism", "Parameter", "Reading", "Role", "Term", "Variant", "in_order",
-           "names", "register"]
+__all__ = ["FRICTION_STAYS", "MECHANISMS", "Check", "Layout", "Mechanism", "Parameter", "Reading", "Role", "Term",
+           "Variant", "in_order", "names", "register"]
 
 import_modules(__name__, __path__, skip=("registry",))

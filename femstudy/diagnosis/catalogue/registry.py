@@ -26,6 +26,12 @@ class Role(enum.Enum):
     SENSOR = "sensor"
 
 
+#: A ``GAIN`` mechanism's variant setting (True): the simulation's own chip friction keeps the
+#: level it reached once the simulated load falls (after breakthrough), instead of fading with the
+#: cut; the model reads it (:func:`femstudy.diagnosis.model._rise`).
+FRICTION_STAYS = "friction_stays"
+
+
 @dataclass(frozen=True)
 class Layout:
     """A mechanism's parameters for one variant: names, bounds, starting values; ``counted`` marks

@@ -11,7 +11,10 @@ temperature): softening is the bone's, in the cut, so it
 
 Fit: H = 1 − s(t − t_c) on the thrust and 1 − κ s on the torque, s a non-negative combination of
 the monotone I-splines of :mod:`..flexible` over the time in contact, on 2, 4 or 8 intervals
-(variants, :data:`RESOLUTIONS`: the coarsest that fits pays for the fewest coefficients).
+(variants, :data:`RESOLUTIONS`: the coarsest that fits pays for the fewest coefficients). When the
+simulation has a chip friction of its own, which after breakthrough may fade with the cut or stay
+while the drill feeds, one more variant reads it as staying, at the coarsest resolution
+(:data:`FRICTION_STAYS`, read by the model's rise R).
 Size: the thrust's loss s at the end of the cut.
 
 Test (:meth:`ThermalSoftening.checks`): ``both_channels`` — with torque, κ lies within
@@ -29,8 +32,8 @@ import math
 import numpy as np
 from scipy import optimize
 
-from femstudy.diagnosis.catalogue.registry import (Check, Layout, Parameter, Reading, Role, Term, Variant,
-                                                  proportional_term, register)
+from femstudy.diagnosis.catalogue.registry import (FRICTION_STAYS, Check, Layout, Parameter, Reading, Role, Term,
+                                                  Variant, proportional_term, register)
 from femstudy.diagnosis.flexible import monotone_basis
 
 NAME = "thermal_softening"
@@ -52,7 +55,12 @@ class ThermalSoftening:
         return True
 
     def variants(self, problem, residual, base) -> list[Variant]:
-        return [Variant((("intervals", n),), f"{n} intervals") for n in RESOLUTIONS]
+        fades = [Variant((("intervals", n),), f"{n} intervals") for n in RESOLUTIONS]
+        if not problem.has_chip_friction:
+            return fades
+        coarsest = RESOLUTIONS[0]
+        return fades + [Variant((("intervals", coarsest), (FRICTION_STAYS, True)),
+                                f"{coarsest} intervals, the simulated chip friction staying after breakthrough")]
 
     @staticmethod
     def intervals(variant: Variant) -> int:
