@@ -66,8 +66,9 @@ def _distinct_models(specs: list[Spec]) -> list[Spec]:
     """``specs`` without those that are the same model as an earlier one (:func:`_model_key`)."""
     seen, out = set(), []
     for spec in specs:
-        if _model_key(spec) not in seen:
-            seen.add(_model_key(spec))
+        key = _model_key(spec)
+        if key not in seen:
+            seen.add(key)
             out.append(spec)
     return out
 
