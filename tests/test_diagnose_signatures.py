@@ -179,6 +179,29 @@ def test_a_torque_only_loss_is_not_softening():
     assert any(k in ("torque_only", "step") for k in kinds(d))
 
 
+@pytest.mark.parametrize("loss, within", [(0.3, True), (0.9, False)])
+def test_a_softening_takes_part_of_the_loads_not_nearly_all(loss, within):
+    """Both loads fall linearly over the cut, by 30 % or by 90 % (far beyond what heat does to
+    bone): the softening's fit follows either, and its test passes the first and fails the second."""
+    from femstudy.diagnosis.catalogue import MECHANISMS, Variant
+    from femstudy.diagnosis.fit import fit
+    from femstudy.diagnosis.model import Spec
+    from femstudy.diagnosis.prepare import align, aligned, smoothed
+    from femstudy.diagnosis.signatures import refitter
+
+    rec = synthesize(1.5, 1500, effects=NUISANCE, seed=26, model="allotta")
+    sim = TraceSimulation.from_recording(synthesize(1.5, 1500, model="allotta", effects=Effects.none()), 1500)
+    gain = 1 - loss * np.clip((rec.time_s - 2.2) / 4.5, 0, 1)
+    problem, _ = smoothed(replace(rec, thrust_N=rec.thrust_N * gain, torque_Nmm=rec.torque_Nmm * gain), sim, 6.0)
+    problem = aligned(problem, align(problem))
+    softening = MECHANISMS["thermal_softening"]
+    f = fit(problem, Spec((("thermal_softening", Variant((("intervals", 4),), "4 intervals")),)))
+    assert softening.size(problem, f) == pytest.approx(loss, abs=0.05)
+    (check,) = [c for c in softening.checks(problem, f, refitter(problem, "thermal_softening"))
+                if c.name == "part_of_the_loads"]
+    assert check.passed == within
+
+
 def friction_pair(stays: bool):
     """A simulation with a chip friction of its own, which after breakthrough stays while the drill
     feeds (``stays``) or fades with the cone leaving the cortex, and a recording of the same cut

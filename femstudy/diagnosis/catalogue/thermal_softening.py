@@ -17,7 +17,8 @@ while the drill feeds, one more variant reads it as staying, at the coarsest res
 (:data:`FRICTION_STAYS`, read by the model's rise R).
 Size: the thrust's loss s at the end of the cut.
 
-Test (:meth:`ThermalSoftening.checks`): ``both_channels`` — with torque, κ lies within
+Tests (:meth:`ThermalSoftening.checks`): ``part_of_the_loads`` — the loss at the end of the cut
+is at most :data:`MAX_LOSS`; ``both_channels`` — with torque, κ lies within
 :data:`KAPPA_RANGE`: a loss of one channel alone (friction on the drill's body, a sensor) is not
 the bone softening.
 
@@ -40,6 +41,10 @@ NAME = "thermal_softening"
 #: Intervals of the monotone spline, one variant each, simplest first.
 RESOLUTIONS = (2, 4, 8)
 FLOOR = 0.05
+#: The largest loss at the end of the cut that heat explains: it lowers the bone's strength by tens
+#: of percent over the temperatures a cut reaches, never to nothing. A larger fitted loss is another
+#: mechanism's excess cancelled (a clogging rising as the loads fall away), not the bone.
+MAX_LOSS = 0.75
 #: Torque's loss over the thrust's that a softening of the bone allows, and the parameter's bounds.
 KAPPA_RANGE = (0.6, 1.6)
 KAPPA_BOUNDS = (0.25, 4.0)
@@ -91,12 +96,16 @@ class ThermalSoftening:
         return float(np.sum(fit.block(NAME)[:n + 2]))   # every I-spline is 1 at the end of the cut
 
     def checks(self, problem, fit, refit) -> list[Check]:
-        if not problem.has_torque:
-            return []
-        kappa = fit.value(f"{NAME}.kappa")
-        return [Check("both_channels", KAPPA_RANGE[0] <= kappa <= KAPPA_RANGE[1], kappa,
-                      f"the torque loses {kappa:.2f} times the thrust's fraction (a softening of the bone: "
-                      f"{KAPPA_RANGE[0]:g}-{KAPPA_RANGE[1]:g})")]
+        loss = self.size(problem, fit)
+        out = [Check("part_of_the_loads", loss <= MAX_LOSS, loss,
+                     f"the loads lose {100 * loss:.0f} % by the end of the cut (heat takes at most "
+                     f"{100 * MAX_LOSS:.0f} %: more is another mechanism's excess cancelled)")]
+        if problem.has_torque:
+            kappa = fit.value(f"{NAME}.kappa")
+            out.append(Check("both_channels", KAPPA_RANGE[0] <= kappa <= KAPPA_RANGE[1], kappa,
+                             f"the torque loses {kappa:.2f} times the thrust's fraction (a softening of the bone: "
+                             f"{KAPPA_RANGE[0]:g}-{KAPPA_RANGE[1]:g})"))
+        return out
 
     def reading(self, problem, fit, context) -> Reading:
         cut = problem.cut_s
