@@ -128,11 +128,13 @@ def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict
             tasks = []
             for subset in itertools.combinations(names, size):
                 specs = [Spec(tuple(zip(subset, combo))) for combo in itertools.product(*(options[n] for n in subset))]
-                tasks += [(frozenset(subset), spec, _start(fits if friction_stays(spec) else fading, frozenset(subset)))
-                          for spec in _distinct_models(specs)]
-            fitted = pool.fit_many([(spec, start) for _, spec, start in tasks])
-            for (subset, spec, _), f in zip(tasks, fitted):   # the first of equal BICs, as one by one
-                for kept in (fits, fading) if not friction_stays(spec) else (fits,):
+                for spec in _distinct_models(specs):
+                    stays = friction_stays(spec)
+                    tasks.append((frozenset(subset), spec, (fits,) if stays else (fits, fading),
+                                  _start(fits if stays else fading, frozenset(subset))))
+            fitted = pool.fit_many([(spec, start) for _, spec, _, start in tasks])
+            for (subset, _, kept_in, _), f in zip(tasks, fitted):   # the first of equal BICs, as one by one
+                for kept in kept_in:
                     if subset not in kept or bic(problem, f) < bic(problem, kept[subset]):
                         kept[subset] = f
     return fits
