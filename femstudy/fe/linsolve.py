@@ -115,6 +115,20 @@ class Factor:
         self.solves += 1
         return x
 
+    #: Whether :meth:`approximate` is less accurate than :meth:`solve` (one substitution of a
+    #: single-precision factor), so that :meth:`refine` has work to do.
+    refines = False
+
+    def approximate(self, b: np.ndarray) -> np.ndarray:
+        """x ≈ A⁻¹b at the cost of one substitution: :meth:`solve` itself, unless
+        :attr:`refines` (then ~1e-2 relative error on the femur, docs/solver.md)."""
+        return self.solve(b)
+
+    def refine(self, b: np.ndarray, x: np.ndarray, rtol: float) -> np.ndarray:
+        """x refined until its estimated relative error is below ``rtol`` (x as it is unless
+        :attr:`refines`)."""
+        return x
+
     def close(self) -> None:
         """Release the factorisation where it lives outside Python (PARDISO: in MKL); the other
         methods' memory goes when the factor is dropped. A closed factor cannot solve."""
@@ -293,8 +307,29 @@ class PardisoFactor(Factor):
                         "factor_s": time.perf_counter() - numeric}
         self.precision = "single" if dtype == np.float32 else "double"
 
+    @property
+    def refines(self) -> bool:
+        return self.precision == "single"
+
+    def approximate(self, b):
+        start = time.perf_counter()
+        x = self._handle.solve(np.asarray(b, dtype=float)).astype(float)
+        self.solve_s += time.perf_counter() - start
+        return x
+
+    def refine(self, b, x, rtol):
+        start = time.perf_counter()
+        x = self._refined(np.asarray(b, dtype=float), np.array(x, dtype=float), rtol)
+        self.solve_s += time.perf_counter() - start
+        return x
+
     def _solve(self, b, x0):
         x = self._handle.solve(b).astype(float)
+        return self._refined(b, x, REFINE_RTOL)
+
+    def _refined(self, b, x, rtol):
+        """x ← x + L⁻ᵀL⁻¹(b − A x) until the last correction times its contraction rate is
+        below ``rtol`` of x (the first correction's rate is taken as its size: x's own error)."""
         if self.precision == "double":
             return x
         B, X = b.reshape(self.n, -1), x.reshape(self.n, -1)
@@ -306,7 +341,7 @@ class PardisoFactor(Factor):
             scale = np.abs(X).max(axis=0)
             new = float(np.max(np.abs(D).max(axis=0) / np.where(scale > 0, scale, 1.0)))
             size, rate = new, new / size
-            if size * min(rate, 1.0) <= REFINE_RTOL or (rate > 0.5 and size <= REFINE_FLOOR):
+            if size * min(rate, 1.0) <= rtol or (rate > 0.5 and size <= REFINE_FLOOR):
                 return x  # X is a view of x
             if rate > 0.5:
                 break

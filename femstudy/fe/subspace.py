@@ -45,6 +45,16 @@ class GrowingQR:
     def R(self) -> np.ndarray:
         return self._R[:self.rows, :self.cols]
 
+    @property
+    def size(self) -> tuple[int, int]:
+        """(rows, columns) of R: where :meth:`truncate` can return to."""
+        return self.rows, self.cols
+
+    def truncate(self, size: tuple[int, int]) -> None:
+        """Forget the blocks appended since R had ``size`` (:attr:`size`)."""
+        self.rows, self.cols = size
+        self._R[self.rows:, self.cols:] = 0.0
+
     def append(self, W: np.ndarray) -> None:
         Q, rows, cols, b = self.Q[:, :self.rows], self.rows, self.cols, W.shape[1]
         scale = np.linalg.norm(W, axis=0).max()
