@@ -29,10 +29,6 @@ from femstudy.femur_mesh import CANCELLOUS_DISTAL, CANCELLOUS_PROXIMAL, CORTICAL
 
 FE_MODULES = {"femstudy": "femstudy.fe", "standin": "bench.peers.standin"}
 PATCH_RADIUS_MM = 1.35
-#: From this many DOFs a lone transient is faster on a single-precision factor (its halved
-#: factorisation outweighs the refinement of its Krylov blocks: −8 % at 5 mm, −33 % at 3.5 mm,
-#: +10 % at 16 mm; docs/solver.md).
-SINGLE_PRECISION_TRANSIENT_DOFS = 250_000
 
 
 @dataclass
@@ -97,12 +93,9 @@ def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
 
     if system is None:
         system, patch, bc = setup(fe, model)
-    # one solve, or a transient of many unknowns: a single-precision factor refined to double
-    # precision; a smaller transient's several block solves: a double-precision factor
-    # (docs/solver.md, "A transient on a single-precision factor")
-    single = analysis == "static" or system.n_dofs >= SINGLE_PRECISION_TRANSIENT_DOFS
-    fs = fe.factorize(system, bc, **({"precision": "single" if single else "double"}
-                                    if fe.__name__ == "femstudy.fe" else {}))
+    # a static solve or a lone transient: a single-precision factor, its solves refined to
+    # double precision (the transient's Krylov blocks only as far as they need: docs/solver.md)
+    fs = fe.factorize(system, bc, **({"precision": "single"} if fe.__name__ == "femstudy.fe" else {}))
     if analysis == "static":
         force = model.static_thrust_N * patch.thrust + model.static_torque_Nmm * patch.torque
         return fe.solve_static(fs, force)

@@ -23,6 +23,7 @@ import importlib.util
 import logging
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
@@ -191,8 +192,24 @@ def padded(x: np.ndarray, positions: np.ndarray, n: int) -> np.ndarray:
 
 
 def restricted_product(A, positions: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """A[positions][:, positions] @ X without forming that block: A times X padded with zeros."""
-    return (A @ padded(X, positions, A.shape[0]))[positions]
+    """A[positions][:, positions] @ X without forming that block: A times X padded with zeros.
+
+    Several columns are multiplied one by one, in as many threads as MKL may use (scipy's
+    sparse products release the GIL): scipy's product with a block of columns is slower than
+    column by column (two columns on the 3.5 mm femur's K: 0.17 s, against 0.12 s one after
+    the other and 0.08 s in two threads)."""
+    if X.ndim == 1 or X.shape[1] == 1:
+        return (A @ padded(X, positions, A.shape[0]))[positions]
+    from femstudy.fe.pardiso import max_threads
+
+    out = np.empty(X.shape)
+
+    def column(j: int) -> None:
+        out[:, j] = (A @ padded(X[:, j], positions, A.shape[0]))[positions]
+
+    with ThreadPoolExecutor(min(X.shape[1], max_threads())) as pool:
+        list(pool.map(column, range(X.shape[1])))
+    return out
 
 
 class Restriction:

@@ -66,6 +66,15 @@ def _library() -> ctypes.CDLL:
     return lib
 
 
+def max_threads() -> int:
+    """The threads MKL may use now (a worker process's threadpoolctl limit, else its default:
+    the cores), 1 where MKL is not installed."""
+    try:
+        return max(1, int(_library().mkl_get_max_threads()))
+    except (ImportError, AttributeError):
+        return 1
+
+
 def load() -> None:
     """Load MKL's runtime now (so that a thread limit set next, e.g. by threadpoolctl, reaches it)."""
     _library()
