@@ -33,7 +33,10 @@ from femstudy.materials import BoneMaterials
 
 log = logging.getLogger(__name__)
 
-#: Elements per batch: bounds the temporary arrays to a few hundred MB at any mesh size.
+#: Fewest elements per batch. A batch's scatter returns a full-size array of the pattern's
+#: blocks, so a fine mesh takes batches of as many element blocks as the pattern has (its
+#: temporaries about twice K's size): on the 3.5 mm femur (5.9M blocks) the element loop took
+#: 4.1 s in batches of 20,000 and 3.1 s in batches of 58,942; at 16 mm nothing changes.
 CHUNK = 20_000
 
 
@@ -277,8 +280,9 @@ def _assemble(mesh: TetMesh, materials: BoneMaterials, order: int, long_axis) ->
     S = reference_stiffness(ref)
     C = stiffness_tensor(mats.D)
     blocks, nodal_mass = np.zeros((nnzb, 9)), np.zeros(nnzb)
-    for start in range(0, len(cells), CHUNK):
-        part = np.arange(start, min(start + CHUNK, len(cells)))
+    batch = max(CHUNK, nnzb // nbf ** 2)
+    for start in range(0, len(cells), batch):
+        part = np.arange(start, min(start + batch, len(cells)))
         n, pairs = len(part), len(part) * nbf * nbf
         invJ, det = jacobians(skmesh.p.T, skmesh.t.T[part])
         Ke = element_stiffness(S, invJ, det, C[mats.index[part]])
