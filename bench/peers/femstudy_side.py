@@ -11,7 +11,7 @@ scikit-fem stand-in :mod:`bench.peers.standin` with the same interface. Only thi
 touches the solver's objects, and only these names: ``assemble``, ``drill_patch``, ``clamp``,
 ``factorize``, ``solve_static(fs, f)``, ``solve_transient(fs, patterns, amplitudes, times_s,
 observer=)`` (the observer is :class:`femstudy.fe.StepRecorder`, given every stepped field);
-``system.nodes/cells/region/n_dofs``, ``patch.thrust/torque/patterns``, ``bc.fixed``.
+``system.nodes/cells/region/n_dofs/mesh/order``, ``patch.thrust/torque/patterns``, ``bc.fixed``.
 """
 
 from __future__ import annotations
@@ -99,7 +99,7 @@ def solve(fe, model: Model, analysis: str, system=None, patch=None, bc=None):
     if analysis == "static":
         force = model.static_thrust_N * patch.thrust + model.static_torque_Nmm * patch.torque
         return fe.solve_static(fs, force)
-    drill, surface = drill_node(system.nodes, model.site), surface_nodes(system.cells)
+    drill, surface = drill_node(system.nodes, model.site), surface_nodes(system)
     surface_mask = np.zeros(len(system.nodes), bool)
     surface_mask[surface] = True
     selector = np.zeros((3, system.n_dofs))
@@ -139,7 +139,7 @@ def build_peer_case(fe, model: Model) -> PeerCase:
                     static_thrust_N=model.static_thrust_N, static_torque_Nmm=model.static_torque_Nmm,
                     times_s=np.asarray(model.times_s), thrust_N=np.asarray(model.thrust_N),
                     torque_Nmm=np.asarray(model.torque_Nmm), drill_node=drill_node(system.nodes, model.site),
-                    watch_nodes=surface_nodes(system.cells))
+                    watch_nodes=surface_nodes(system))
 
 
 def drill_node(nodes: np.ndarray, site: DrillSite) -> int:
@@ -147,12 +147,12 @@ def drill_node(nodes: np.ndarray, site: DrillSite) -> int:
     return int(np.argmin(np.linalg.norm(nodes - site.entry_point, axis=1)))
 
 
-#: The faces of a P2 tet in scikit-fem's layout: three vertices, then the three edge nodes.
-P2_FACES = np.array([[0, 1, 2, 4, 5, 6], [0, 1, 3, 4, 7, 8], [0, 2, 3, 6, 7, 9], [1, 2, 3, 5, 8, 9]])
-
-
-def surface_nodes(cells: np.ndarray) -> np.ndarray:
-    """Nodes on the boundary: those of faces that belong to one element only."""
-    faces = cells[:, P2_FACES].reshape(-1, 6)
-    _, first, count = np.unique(np.sort(faces[:, :3], axis=1), axis=0, return_index=True, return_counts=True)
-    return np.unique(faces[first[count == 1]])
+def surface_nodes(system) -> np.ndarray:
+    """Nodes on the boundary: the vertices of faces that belong to one element only, and the
+    P2 mid-edge nodes of their edges (scikit-fem numbers those after the vertices, in
+    ``mesh.edges`` order)."""
+    mesh = system.mesh
+    vertices = mesh.facets[:, mesh.boundary_facets()].ravel()
+    if system.order == 1:
+        return np.unique(vertices)
+    return np.unique(np.concatenate([vertices, mesh.p.shape[1] + mesh.boundary_edges()]))

@@ -87,6 +87,12 @@ class System:
     K: sp.csr_matrix
     M: sp.csr_matrix
 
+    order = 2
+
+    @property
+    def mesh(self) -> MeshTet:
+        return self.basis.mesh
+
     @property
     def n_dofs(self) -> int:
         return self.basis.N
