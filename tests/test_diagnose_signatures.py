@@ -147,6 +147,41 @@ def test_a_feed_error_keeps_its_placement_and_polarity(tmp_path):
     assert min(correlations) > 0.5 and "moved by +7.81" in sim.note
 
 
+@pytest.mark.parametrize("seed, line", [(405_001, 3), (405_002, 4)])
+def test_a_slow_sawtooth_under_clogging_is_found_from_its_harmonic(seed, line, tmp_path):
+    """Formbench tuning cases clogging+pulsation: a sawtooth feed at 0.43 or 0.49 Hz beside a
+    clogging. The clogging's flexible rise takes up the wave's fundamental, so the scan's best
+    line is its 3rd or 4th harmonic; tried as that harmonic of a slower wave, the pulsation is
+    named at its own frequency, beside the clogging (before, neither was named)."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from femstudy.diagnosis.catalogue import MECHANISMS
+
+    case = make_formbench_case("clogging+pulsation", seed, "tuning", tmp_path)
+    d = diagnose(case.recording, case.simulation)
+    assert named(d) == {"chip_clogging", "feed_pulsation"}
+    truth = case.parameters["pulsation"]["frequency_hz"]
+    fitted, _, _ = MECHANISMS["feed_pulsation"].frequency(d.problem, d.verdict.fit)
+    assert fitted == pytest.approx(truth, rel=0.05)
+    assert any(v.get("fundamental_of") == line for _, v in d.verdict.fit.spec.variants)
+
+
+def test_a_chirp_is_not_taken_for_a_slower_wave(tmp_path):
+    """Formbench tuning case clogging+softening+pulsation 110000: a feed chirping from 0.84 to
+    1.55 Hz. Half its best line, as a slower wave, fits better, but its fundamental is a tenth of
+    its second harmonic: it is the line's wave with a spare slow part, which took the softening's
+    place (the softening then lost 82 % of the loads). It does not compete, and the three are named."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from femstudy.diagnosis.catalogue.feed_pulsation import slower_wave_holds
+
+    case = make_formbench_case("clogging+softening+pulsation", 110_000, "tuning", tmp_path)
+    d = diagnose(case.recording, case.simulation)
+    assert named(d) == {"chip_clogging", "feed_pulsation", "thermal_softening"}
+    offered = [f for f in d.fits if "feed_pulsation" in f.subset
+               and f.spec.variant("feed_pulsation").get("fundamental_of")]
+    assert all(slower_wave_holds(f) for f in offered)
+    assert d.verdict.fit.spec.variant("feed_pulsation").get("fundamental_of") is None
+
+
 def test_epoch_time_stamps_give_the_diagnosis_of_plain_ones(clogging_pair, plain, tmp_path):
     rec, sim = clogging_pair
     body = "".join(f"{1.7e9 + t:.6f},{f:.5f},{q:.5f}\n" for t, f, q in zip(rec.time_s, rec.thrust_N, rec.torque_Nmm))

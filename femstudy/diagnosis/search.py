@@ -9,12 +9,16 @@
    says, :func:`.model.friction_stays`) and is a candidate as offered.
 2. A mechanism whose variants come from a scan (a feed pulsation's frequency) scans the residual
    of that fit and of the simulation alone; the distinct frequencies found, at most
-   :data:`MAX_SCANNED` of them, are its candidates.
+   :data:`MAX_SCANNED` of them, are its candidates, with the slower waves whose harmonic the best
+   line may be (:func:`_distinct`): each is fitted beside the best fit of step 1, and of those
+   whose fundamental is their largest line (:func:`.catalogue.feed_pulsation.slower_wave_holds`)
+   the one of the lowest BIC stays a candidate.
 3. Every subset (2⁴ = 16 with the four mechanisms) is fitted in every combination of its members'
    candidates that is a distinct model, each started from the best fit of the subsets one
    mechanism smaller (with the friction read as fading, from the best such fit: the staying reading
    adds fits and changes none of the others); the combination with the lowest BIC (on the data's
-   own noise level) is the subset's fit.
+   own noise level) is the subset's fit, a slower wave only where its fundamental is its largest
+   line (:func:`_better`).
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ import itertools
 import math
 
 from femstudy.diagnosis.catalogue import FRICTION_STAYS, MECHANISMS, Variant, in_order
+from femstudy.diagnosis.catalogue.feed_pulsation import FUNDAMENTAL_OF, slower_wave_holds
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.fitpool import FitPool, portable, restored
 from femstudy.diagnosis.model import Spec, friction_stays
@@ -45,13 +50,21 @@ def _start(fits: dict, subset: frozenset) -> dict:
 
 
 def _distinct(variants: list[Variant]) -> list[Variant]:
-    out: list[Variant] = []
-    for v in variants:
-        f = v.get("frequency_hz")
-        if f is None or all(abs(f / o.get("frequency_hz") - 1) > SAME_FREQUENCY or v.get("harmonics") != o.get("harmonics")
-                            for o in out):
-            out.append(v)
-    return out[:MAX_SCANNED]
+    """The first :data:`MAX_SCANNED` distinct scanned variants, then the slower waves found as
+    harmonics of a line (:data:`.catalogue.feed_pulsation.FUNDAMENTAL_OF`) that are distinct from
+    them: those only add candidates."""
+    def distinct(candidates: list[Variant], kept: list[Variant]) -> list[Variant]:
+        out: list[Variant] = []
+        for v in candidates:
+            f = v.get("frequency_hz")
+            if f is None or all(abs(f / o.get("frequency_hz") - 1) > SAME_FREQUENCY
+                                or v.get("harmonics") != o.get("harmonics") for o in kept + out):
+                out.append(v)
+        return out
+
+    lines = distinct([v for v in variants if v.get(FUNDAMENTAL_OF) is None], [])[:MAX_SCANNED]
+    slower = distinct([v for v in variants if v.get(FUNDAMENTAL_OF) is not None], lines)
+    return lines + slower
 
 
 def _model_key(spec: Spec) -> tuple:
@@ -104,8 +117,22 @@ def candidates(problem: Problem, baseline: Fit, pool: FitPool | None = None) -> 
     bases = [portable(base) for base in ([best] if best is not None else []) + [baseline]]
     found = iter(pool.run(_scanned, [(name, base) for name in scanning for base in bases]))
     for name in scanning:
-        out[name] = _distinct([variant for _ in bases for variant in next(found)])
+        out[name] = _one_slower_wave(problem, pool, best, name,
+                                     _distinct([variant for _ in bases for variant in next(found)]))
     return {name: variants for name, variants in out.items() if variants}
+
+
+def _one_slower_wave(problem: Problem, pool: FitPool, best: Fit | None, name: str, variants: list[Variant]) -> list[Variant]:
+    """``variants`` of the scanning mechanism ``name`` with one slower wave at most: each is fitted
+    beside ``best`` (the fixed mechanisms' best fit), and of those whose fundamental is their
+    largest line (:func:`.catalogue.feed_pulsation.slower_wave_holds`) the one of the lowest BIC
+    stays (item 2 of the module docstring)."""
+    slower = [v for v in variants if v.get(FUNDAMENTAL_OF) is not None]
+    beside = best.spec.variants if best is not None else ()
+    fits = pool.fit_many([(Spec(beside + ((name, v),)), best.params() if best is not None else None) for v in slower])
+    held = [(bic(problem, f), k) for k, f in enumerate(fits) if slower_wave_holds(f)]
+    kept = slower[min(held)[1]] if held else None
+    return [v for v in variants if v.get(FUNDAMENTAL_OF) is None or v is kept]
 
 
 def _scanned(problem: Problem, item: tuple[str, tuple]) -> list[Variant]:
@@ -135,9 +162,19 @@ def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict
             fitted = pool.fit_many([(spec, start) for _, spec, _, start in tasks])
             for (subset, _, kept_in, _), f in zip(tasks, fitted):   # the first of equal BICs, as one by one
                 for kept in kept_in:
-                    if subset not in kept or bic(problem, f) < bic(problem, kept[subset]):
+                    if subset not in kept or _better(problem, f, kept[subset]):
                         kept[subset] = f
     return fits
+
+
+def _better(problem: Problem, f: Fit, than: Fit) -> bool:
+    """Whether ``f`` is a better fit of its subset than ``than``: a lower BIC, and before that
+    the form it was offered as (a slower wave whose fundamental is not its largest line is not
+    that wave: :func:`.catalogue.feed_pulsation.slower_wave_holds`)."""
+    holds, other_holds = slower_wave_holds(f), slower_wave_holds(than)
+    if holds != other_holds:
+        return holds
+    return bic(problem, f) < bic(problem, than)
 
 
 def baseline_fit(problem: Problem) -> Fit:

@@ -20,7 +20,8 @@ intermittent stall), φ = 2π f_p (t − t_m) + π r f_p (t − t_m)²/(T/2) (a 
 ±r over half the cut, centred at the cut's middle t_m, tried only where the slowest part of the
 cut still holds :data:`REPEAT_PERIODS` periods, harmonics only where the cut holds that many); thrust × (1 + m), torque × (1 + κm), the
 simulation read at τ' = t − Δt + ∫m. H and starting values of f_p and r are found by a scan of the linearised model
-(:meth:`FeedPulsation.variants`); f_p (within ±:data:`FREQUENCY_RANGE`) and r are then fitted
+(:meth:`FeedPulsation.variants`; the best line is also tried as a harmonic of a slower wave,
+:data:`SUBHARMONICS`); f_p (within ±:data:`FREQUENCY_RANGE`) and r are then fitted
 with the rest. The scanned frequency costs its parameter and the look-elsewhere allowance
 (:func:`look_elsewhere`).
 Size: the thrust's relative swing, √2 × the rms of m over the cut.
@@ -63,6 +64,12 @@ SWEEPS = np.linspace(-0.6, 0.6, 13)
 #: Scan grid size and how many of its local minima are tried as frequencies.
 SCAN_POINTS = 240
 CANDIDATES = 3
+#: The scan's best frequency is also tried as these harmonics of a slower wave, which has at least
+#: MIN_WAVE_HARMONICS harmonics (and as many as the line's number).
+SUBHARMONICS = (2, 3, 4)
+MIN_WAVE_HARMONICS = 3
+#: A variant's setting: the harmonic number of the scan's line it was found as (a slower wave's).
+FUNDAMENTAL_OF = "fundamental_of"
 #: The torque's relative swing over the thrust's.
 KAPPA_RANGE = (0.6, 1.5)
 FLOOR = 0.03
@@ -127,6 +134,20 @@ def _integral(t: np.ndarray, x: np.ndarray, origin: float) -> np.ndarray:
     k = int(np.clip(np.searchsorted(t, origin), 1, t.size - 1))
     at = cum[k - 1] + (cum[k] - cum[k - 1]) * (origin - t[k - 1]) / (t[k] - t[k - 1])
     return cum - at
+
+
+def slower_wave_holds(fit) -> bool:
+    """Whether a fit whose pulsation was offered as a slower wave (:data:`FUNDAMENTAL_OF`) is that
+    wave: its fundamental is its largest line. A feed drive's waves have it so: |sin kx| ≤ k|sin x|
+    makes the fundamental the largest line of any train of rectangular pulses, a sawtooth's lines
+    fall as 1/k, a triangle's as 1/k². A fit whose fundamental is weaker than a harmonic is that
+    harmonic's own wave (a swept one, say) with a spare slow component. True for every other fit."""
+    if NAME not in fit.subset or fit.spec.variant(NAME).get(FUNDAMENTAL_OF) is None:
+        return True
+    h = fit.spec.variant(NAME).get("harmonics")
+    coef = fit.block(NAME)[:2 * h]
+    lines = np.hypot(coef[0::2], coef[1::2])
+    return bool(lines[0] >= lines[1:].max())
 
 
 class FeedPulsation:
@@ -194,6 +215,28 @@ class FeedPulsation:
             if rank == 0 and harmonics == 1 and 3 in allowed:   # a pulse or a stick-slip the scan underrates
                 out.append(Variant((("frequency_hz", frequency), ("sweep", sweep), ("harmonics", 3)),
                                    f"{frequency:.3g} Hz, 3 harmonics"))
+            if rank == 0:
+                out += self._fundamentals(problem, frequency, gain)
+        return out
+
+    def _fundamentals(self, problem, frequency: float, gain) -> list[Variant]:
+        """The slower waves whose k-th harmonic (k in :data:`SUBHARMONICS`) is the scan's best line
+        at ``frequency`` [Hz]: a slow wave's fundamental is what the other mechanisms' flexible
+        shapes take up first, so a sawtooth's or a pulse's higher harmonic can stand out in the
+        residual instead (and the scan cannot tell which harmonic: it sees the fundamental only
+        weakly). Each has max(k, :data:`MIN_WAVE_HARMONICS`) harmonics, at least
+        :data:`REPEAT_PERIODS` periods in the cut (its waveform must be seen to repeat) and no
+        sweep; its frequency is refined over one scan step either side by ``gain``."""
+        out = []
+        step = (highest_hz(problem) / lowest_hz(problem)) ** (1 / (SCAN_POINTS - 1))
+        for k in SUBHARMONICS:
+            f, h = frequency / k, max(k, MIN_WAVE_HARMONICS)
+            if f < lowest_hz(problem) or f * problem.cut_s < REPEAT_PERIODS or h * f > nyquist_hz(problem):
+                continue
+            fine = np.linspace(f / step, f * step, 9)
+            f = float(fine[int(np.argmax([gain(x, 0.0, h)[0] for x in fine]))])
+            out.append(Variant((("frequency_hz", f), ("sweep", 0.0), ("harmonics", h), (FUNDAMENTAL_OF, k)),
+                               f"{f:.3g} Hz, {h} harmonics (1/{k} of {frequency:.3g} Hz)"))
         return out
 
     def layout(self, problem, variant: Variant) -> Layout:
