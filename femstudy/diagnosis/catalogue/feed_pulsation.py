@@ -142,9 +142,10 @@ def slower_wave_holds(fit) -> bool:
     makes the fundamental the largest line of any train of rectangular pulses, a sawtooth's lines
     fall as 1/k, a triangle's as 1/k². A fit whose fundamental is weaker than a harmonic is that
     harmonic's own wave (a swept one, say) with a spare slow component. True for every other fit."""
-    if NAME not in fit.subset or fit.spec.variant(NAME).get(FUNDAMENTAL_OF) is None:
+    variant = fit.spec.variant(NAME) if NAME in fit.subset else None
+    if variant is None or variant.get(FUNDAMENTAL_OF) is None:
         return True
-    h = fit.spec.variant(NAME).get("harmonics")
+    h = variant.get("harmonics")
     coef = fit.block(NAME)[:2 * h]
     lines = np.hypot(coef[0::2], coef[1::2])
     return bool(lines[0] >= lines[1:].max())
@@ -216,19 +217,19 @@ class FeedPulsation:
                 out.append(Variant((("frequency_hz", frequency), ("sweep", sweep), ("harmonics", 3)),
                                    f"{frequency:.3g} Hz, 3 harmonics"))
             if rank == 0:
-                out += self._fundamentals(problem, frequency, gain)
+                out += self._fundamentals(problem, frequency, gain, grid[1] / grid[0])
         return out
 
-    def _fundamentals(self, problem, frequency: float, gain) -> list[Variant]:
+    def _fundamentals(self, problem, frequency: float, gain, step: float) -> list[Variant]:
         """The slower waves whose k-th harmonic (k in :data:`SUBHARMONICS`) is the scan's best line
         at ``frequency`` [Hz]: a slow wave's fundamental is what the other mechanisms' flexible
         shapes take up first, so a sawtooth's or a pulse's higher harmonic can stand out in the
         residual instead (and the scan cannot tell which harmonic: it sees the fundamental only
         weakly). Each has max(k, :data:`MIN_WAVE_HARMONICS`) harmonics, at least
         :data:`REPEAT_PERIODS` periods in the cut (its waveform must be seen to repeat) and no
-        sweep; its frequency is refined over one scan step either side by ``gain``."""
+        sweep; its frequency is refined over one scan step (the ratio ``step``) either side by
+        ``gain``."""
         out = []
-        step = (highest_hz(problem) / lowest_hz(problem)) ** (1 / (SCAN_POINTS - 1))
         for k in SUBHARMONICS:
             f, h = frequency / k, max(k, MIN_WAVE_HARMONICS)
             if f < lowest_hz(problem) or f * problem.cut_s < REPEAT_PERIODS or h * f > nyquist_hz(problem):
