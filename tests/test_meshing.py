@@ -419,3 +419,41 @@ def test_the_ray_locator_finds_the_cells_pyvistas_locator_finds(any_model):
             differ += 1
         inside += int(found.sum())
     assert inside > 1000 and differ <= 0.002 * inside  # the chords do cross bone
+
+
+def test_a_second_size_reuses_the_surfaces_regions(tmp_path, monkeypatch, caplog):
+    """Builds of one surface at sizes that simplify it alike (a sweep's sizes, its remeshes)
+    read it and build its region fields once; TetWild is stopped right after."""
+    from femstudy.meshing import regions
+
+    class Stop(Exception):
+        pass
+
+    def no_tetwild(*args, **kwargs):
+        raise Stop
+
+    fields_built = []
+    real_fields = regions.build_fields
+    monkeypatch.setattr(regions, "build_fields", lambda *a, **k: fields_built.append(1) or real_fields(*a, **k))
+    monkeypatch.setattr(tetra, "tetrahedralize", no_tetwild)
+    monkeypatch.setattr(model_module, "_last_regions", {})
+    case = parse_case(CASE)
+    with caplog.at_level("INFO", logger="femstudy"):
+        for size in (16.0, 24.0):
+            with pytest.raises(Stop):
+                femur_model(case, tmp_path, size)
+    assert len(fields_built) == 1 and "reusing this surface's frame and region fields" in caplog.text
+
+
+def test_the_regions_key_follows_the_surface_geometry_and_edge_only():
+    from femstudy.meshing.model import regions_key, surface_edge_mm, surface_file
+
+    def key(text, size):
+        spec = femur_spec(parse_case(text))
+        return regions_key(spec, surface_file(spec, cache.DEFAULT_CACHE_DIR), surface_edge_mm(size))
+
+    k0 = key(CASE, 16.0)
+    assert key(CASE, 24.0) == k0  # both simplified to 8 mm edges
+    assert key(CASE.replace("position = 0.5", "position = 0.3"), 16.0) == k0  # the site is not in it
+    assert key(CASE, 8.0) != k0
+    assert key(CASE + "[geometry.cortex]\nmidshaft_mm = 5.0\n", 16.0) != k0
