@@ -216,10 +216,11 @@ def _regions(spec: FemurSpec, path: Path, edge: float) -> _Regions:
     from femstudy.meshing.frame import build_frame
 
     key = regions_key(spec, path, edge)
-    if key in _last_regions:
+    kept = _last_regions.get(key)  # read once: a sweep's threads may replace the entry meanwhile
+    if kept is not None:
         log.info("regions: reusing this surface's frame and region fields from its last build")
-        landmarks.drill_side(_last_regions[key].frame, spec.site)
-        return _last_regions[key]
+        landmarks.drill_side(kept.frame, spec.site)
+        return kept
     raw = surface.read_surface(path, spec.geometry.bodies)
     frame, _ = build_frame(raw.points, raw.triangles, spec.geometry)
     log.info("surface: %d triangles, units %s (x%g to mm), %s femur, length %.1f mm%s", len(raw.triangles),
@@ -238,9 +239,10 @@ def _regions(spec: FemurSpec, path: Path, edge: float) -> _Regions:
     canal_closed = regions.level_surface(fields, "canal")
     patch = _simplified(regions.level_surface(fields, "canal", clip_by="inner", clip_above=0.25 * fields.spacing), edge)
     log.info("regions: inner surface %d triangles, canal %.0f mm^3", inner.n_cells, canal_closed.volume)
+    made = _Regions(raw, frame, surf_mm, outer, fields, inner, canal_closed, patch)
     _last_regions.clear()
-    _last_regions[key] = _Regions(raw, frame, surf_mm, outer, fields, inner, canal_closed, patch)
-    return _last_regions[key]
+    _last_regions[key] = made
+    return made
 
 
 def _build(spec: FemurSpec, path: Path, size: float) -> tuple[dict, dict]:
