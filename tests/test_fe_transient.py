@@ -207,20 +207,22 @@ def test_a_start_in_quasi_static_equilibrium_has_no_initial_acceleration_unless_
 
 @pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
 @pytest.mark.parametrize("steps_per_period", [None, 40])
-def test_a_single_precision_factor_marches_to_the_double_precision_answer_refining_less(model, steps_per_period):
-    """On a single-precision factor the Krylov blocks are refined only as far as their part
-    of the answer needs (femstudy.fe.transient): the fields are the double-precision march's
-    within 10 × its error indicator, in fewer substitutions than refining every block fully."""
+def test_a_single_precision_factor_marches_to_the_double_precision_answer_one_substitution_per_block(
+        model, steps_per_period):
+    """On a single-precision factor nothing is refined (femstudy.fe.transient, 1'): one
+    substitution call per block, and the fields and static shapes are the double-precision
+    march's within 10 × the indicators, quasi-static and resolved."""
     fs, f, period = model
     times = np.linspace(0.0, 3.0, 31) if steps_per_period is None else np.arange(81) * period / steps_per_period
     load = np.sin(times / times[-1] * np.pi) ** 2
     single = factorize(fs.system, fs.bc, precision="single")
     (march, _, a), (reference, _, b) = (_march(s, f, load, times) for s in (single, fs))
     assert march.scheme == reference.scheme == "reduced"
-    # quasi-static, both reach the target 1e-9; resolved, neither (2e-9 to 5e-9 on this tube)
+    # quasi-static, both reach the target 1e-9; resolved, the double-precision march stops at 2e-9 on this tube
     assert march.indicator <= max(1e-9, 3 * reference.indicator), (march.indicator, reference.indicator)
-    np.testing.assert_allclose(a, b, rtol=0, atol=10 * max(reference.indicator, 1e-10) * np.abs(b).max())
-    full = factorize(fs.system, fs.bc, precision="single").factor
-    full.solve(f[fs.bc.free])  # the static shape, refined fully: the cost of one full solve
-    blocks = march.n_vectors  # one load pattern: one vector per block
-    assert single.factor.refinements < full.refinements * blocks, (single.factor.refinements, full.refinements, blocks)
+    tolerance = 10 * max(reference.indicator, march.indicator, 1e-10)
+    np.testing.assert_allclose(a, b, rtol=0, atol=tolerance * np.abs(b).max())
+    np.testing.assert_allclose(march.static_shapes, reference.static_shapes, rtol=0,
+                               atol=tolerance * np.abs(reference.static_shapes).max())
+    assert single.factor.refinements == 0
+    assert march.timings["substitutions"] == len(march.timings["indicator_by_block"]) + 1

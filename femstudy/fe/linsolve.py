@@ -19,6 +19,7 @@ Timings behind these rules: docs/solver.md.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import logging
 import time
@@ -79,6 +80,23 @@ def load_runtimes() -> None:
         pardiso.load()
 
 
+def one_openblas_thread():
+    """A context in which OpenBLAS (numpy's dense products) runs on one thread, for work that
+    alternates dense products with PARDISO substitutions. OpenBLAS's idle threads spin for a
+    while after each call, and on two cores a substitution that follows ran at half speed (16 mm
+    femur, four columns: 48 ms after a pause, 92–101 ms right after a dense product; 55 ms with
+    OpenBLAS on one thread). The dense work between substitutions is products of tall, thin
+    blocks, which one thread does as fast (0.34 M × 20 by its transpose: 3.4 against 3.3 ms)."""
+    return _openblas_pools().limit(limits=1)
+
+
+@functools.cache
+def _openblas_pools():
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController().select(internal_api="openblas")
+
+
 def available_memory_bytes() -> int:
     import psutil
     return int(psutil.virtual_memory().available)
@@ -122,18 +140,13 @@ class Factor:
         return out
 
     #: Whether :meth:`approximate` is less accurate than :meth:`solve` (one substitution of a
-    #: single-precision factor), so that :meth:`refine` has work to do.
+    #: single-precision factor, which :meth:`solve` refines).
     refines = False
 
     def approximate(self, b: np.ndarray) -> np.ndarray:
         """x ≈ A⁻¹b at the cost of one substitution: :meth:`solve` itself, unless
         :attr:`refines` (then ~1e-2 relative error on the femur, docs/solver.md)."""
         return self.solve(b)
-
-    def refine(self, b: np.ndarray, x: np.ndarray, rtol: float) -> np.ndarray:
-        """``x = approximate(b)`` refined until its estimated relative error is below ``rtol``
-        (x as it is unless :attr:`refines`)."""
-        return x
 
     def close(self) -> None:
         """Release the factorisation where it lives outside Python (PARDISO: in MKL); the other
@@ -339,9 +352,6 @@ class PardisoFactor(Factor):
 
     def approximate(self, b):
         return self._timed(self._substitute, np.asarray(b, dtype=float))
-
-    def refine(self, b, x, rtol):
-        return self._timed(self._refined, np.asarray(b, dtype=float), np.array(x, dtype=float), rtol)
 
     def _solve(self, b, x0):
         return self._refined(b, self._substitute(b), REFINE_RTOL)

@@ -27,6 +27,7 @@ import numpy as np
 import scipy.linalg
 
 from femstudy.errors import require
+from femstudy.fe import linsolve
 from femstudy.fe.kept import KeptSolutions, fingerprint, read_store, write_store
 from femstudy.fe.static import FactorizedSystem
 from femstudy.fe.subspace import grow_projection, orthonormal_complement, symmetric
@@ -82,7 +83,8 @@ def solve_modal(fs: FactorizedSystem, k: int = 6, rtol: float = 1e-6, max_blocks
     if kept is not None:
         omega2, phi = kept
     else:
-        omega2, phi = _block_krylov(fs, k, rtol, max_blocks)
+        with linsolve.one_openblas_thread():  # its substitutions follow dense products
+            omega2, phi = _block_krylov(fs, k, rtol, max_blocks)
         if store is not None:
             write_store(store, "modes", omega2=omega2, phi=phi)
     frequencies = np.sqrt(np.maximum(omega2, 0.0)) / (2 * np.pi)
