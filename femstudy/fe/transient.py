@@ -22,7 +22,7 @@ the full equations:
    refinement step would and the inertia's as a Krylov block would. The static shapes need no
    solve of their own: they are the basis's Galerkin ones, V (VᵀKV)⁻¹VᵀP, whose residual lies
    in G's span too and is held to the same indicator. On the femur at 16 and 8 mm: 4
-   substitution calls of 2–6 columns, against 11 of two columns when each block was refined
+   substitution calls of 2–8 columns, against 11 of two columns when each block was refined
    (docs/solver.md).
 2. March: the Galerkin projection (VᵀKV, VᵀMV, VᵀP) is diagonalised; each of its modes is a
    damped oscillator and the average-acceleration rule for it is exactly the bilinear
