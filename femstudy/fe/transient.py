@@ -328,6 +328,26 @@ class _Basis:
                              {}, static_shapes)
 
 
+class _Search:
+    """A march's blocks: each one's indicator, the best march so far, the seconds spent."""
+
+    def __init__(self, rtol: float, **counts):
+        self.rtol, self.best, self.history = rtol, None, []
+        self.timings = {"basis_s": 0.0, "march_s": 0.0, "check_s": 0.0, **counts}
+
+    def offer(self, indicator: float, result) -> bool:
+        """Record a block's indicator, keeping ``result()`` if it is the best yet; True when
+        the search is done (below the target, or stalled)."""
+        self.history.append(indicator)
+        if self.best is None or indicator < self.best.indicator:
+            self.best = result()
+        return indicator <= self.rtol or _stalled(self.history)
+
+    def finish(self) -> _ReducedMarch:
+        self.best.timings.update(self.timings, indicator_by_block=self.history)
+        return self.best
+
+
 def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes, rtol: float = INDICATOR_RTOL,
                   max_blocks: int = MAX_BLOCKS) -> _ReducedMarch | None:
     """The Newmark march in load-dependent Ritz vectors of an exact factor of K_ff (module
@@ -342,7 +362,8 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
     force, shift = GrowingQR(len(P), 2 * capacity + P.shape[1]), GrowingQR(len(P), 2 * capacity + P.shape[1])
     force.append(P)
     shift.append(static_shapes)
-    best, history, timings = None, [], {"basis_s": 0.0, "march_s": 0.0, "check_s": 0.0}
+    search = _Search(rtol)
+    timings = search.timings
     for _ in range(max_blocks):
         block_start = time.perf_counter()
         added = basis.add(fs, new)
@@ -361,13 +382,9 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
                           / max(np.linalg.norm(y, axis=0).max(), np.finfo(float).tiny))
         timings["march_s"] += check_start - march_start
         timings["check_s"] += time.perf_counter() - check_start
-        history.append(indicator)
-        if best is None or indicator < best.indicator:
-            best = basis.result(y, vy, ay, residual, indicator)
-        if indicator <= rtol or _stalled(history):
+        if search.offer(indicator, lambda: basis.result(y, vy, ay, residual, indicator)):
             break
-    best.timings.update(timings, indicator_by_block=history)
-    return best
+    return search.finish()
 
 
 def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes=None,
@@ -389,10 +406,10 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
     start = time.perf_counter()
     force.append(P)
     error.append(fs.factor.approximate(force.Q[:, :force.rows]))
-    timings = {"basis_s": 0.0, "march_s": 0.0, "check_s": 0.0, "substitutions": 1, "columns": force.rows}
+    search = _Search(rtol, substitutions=1, columns=force.rows)
+    timings = search.timings
     new = np.column_stack([error.Q[:, :error.rows] if static_shapes is None else static_shapes] + initial)
     timings["basis_s"] += time.perf_counter() - start
-    best, history = None, []
     for _ in range(max_blocks):
         block_start = time.perf_counter()
         added = basis.add(fs, new)
@@ -422,17 +439,16 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
         indicator = float(np.linalg.norm(D, axis=0).max())
         timings["march_s"] += check_start - march_start
         timings["check_s"] += time.perf_counter() - check_start
-        history.append(indicator)
-        if best is None or indicator < best.indicator:
-            best = basis.result(y, vy, ay, residual, indicator,
-                                basis.basis @ shapes_r if static_shapes is None else static_shapes)
-        if indicator <= rtol or _stalled(history):
+        def result():
+            shapes = basis.basis @ shapes_r if static_shapes is None else static_shapes
+            return basis.result(y, vy, ay, residual, indicator, shapes)
+
+        if search.offer(indicator, result):
             break
         # the next block: the error's principal directions that matter for the target
         U, sigma, _ = np.linalg.svd(D, full_matrices=False)
         new = error.Q[:, :error.rows] @ U[:, :min(int(np.sum(sigma >= DIRECTION_SHARE * rtol)), widest)]
-    best.timings.update(timings, indicator_by_block=history)
-    return best
+    return search.finish()
 
 
 def _stalled(history: list[float], blocks: int = 4) -> bool:
