@@ -62,6 +62,27 @@ def test_a_channel_fault_is_a_finding_corrected_not_a_fitted_scale(clogging_pair
     assert all(abs(v - 1) < 0.05 for v in scales.values()), scales
 
 
+@pytest.mark.parametrize("swapped", [False, True])
+def test_a_pulsing_feed_through_the_entry_does_not_decide_whether_columns_are_swapped(swapped):
+    """femstudy's case clogging_under_pulsation 200003: thrust and torque of one size (31 N, 29
+    N·mm simulated), so the levels read plausibly either way, and a feed pulsing by ±53 % at
+    1.2 Hz through the entry. The channels' own entry shapes then fitted better crossed, and the
+    correct columns were swapped (the fit after it left 40σ at the entry). Torque over thrust
+    rises through the entry whatever the feed does: as labelled it is left alone, swapped by
+    hand it is swapped back."""
+    from bench.synthetic_cases import make_case
+    from femstudy.diagnosis import inputs, sanity
+
+    case = make_case("clogging_under_pulsation", 200_003)
+    rec = case.recording
+    if swapped:
+        rec = replace(rec, thrust_N=rec.torque_Nmm, torque_Nmm=rec.thrust_N)
+    sim, correlations = inputs.on_recording_clock(TraceSimulation.from_recording(case.simulation, rec.spindle_rpm), rec)
+    checked, findings = sanity.check(rec, sim, correlations)
+    assert [f.kind for f in findings] == (["swapped_channels"] if swapped else [])
+    np.testing.assert_array_equal(checked.thrust_N, case.recording.thrust_N)
+
+
 def test_a_knock_in_air_is_an_event_left_out_not_noise_nor_drift(clogging_pair, plain):
     """A knock on the fixture a second before contact: reported as an event in air, left out of the
     noise model and the fits, so the diagnosis and the noise level are the plain case's."""

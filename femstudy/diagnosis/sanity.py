@@ -17,9 +17,12 @@ by a factor:
 - ``swapped_channels``: with both channels, the crossed ratios (recorded thrust over simulated
   torque and the reverse) are both within :data:`SWAP_TOLERANCE` of 1 or a unit factor, and nearer
   to them by :data:`SWAP_MARGIN` than the ratios as labelled; or, when the labelled ratios read
-  plausibly too, the entry's shapes (thrust rising with the engaged lip length, torque with its
-  moment) fit crossed with under :data:`SWAP_SHAPE` of the misfit as labelled. The channels are
-  swapped back.
+  plausibly too, the entry decides (:func:`_entry_crossed`): as the cone engages, the torque grows
+  with the moment of the engaged lips and the thrust with their length, so torque over thrust
+  rises with depth. That ratio is the same whatever the feed does (a pulsing or faltering feed
+  scales both channels alike and the depth stays monotone), where the channels' own shapes are
+  not. Recorded columns whose ratio falls through the entry while the simulation's rises are
+  swapped. The channels are swapped back.
 - ``unit_scale``: a channel's ratio is off by more than :data:`SCALE_LIMIT` and within
   :data:`UNIT_TOLERANCE` of a unit factor (:data:`UNIT_FACTORS`: kN, daN, lbf, kgf, N·m, lbf·in
   written under another unit's name). The channel is rescaled by the factor. ``channel_scale``:
@@ -35,7 +38,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, stats
 
 from femstudy.recordings.reader import Recording
 
@@ -61,8 +64,11 @@ UNIT_TOLERANCE = 1.4
 SWAP_TOLERANCE = 1.3
 SWAP_MARGIN = 1.5
 #: When both pairings read plausibly (thrust and torque of similar size, or unit factors on both
-#: sides), the entry decides: the crossed pairing's shape misfit below this share of the labelled.
-SWAP_SHAPE = 0.5
+#: sides), the entry decides: the rank correlation of torque over thrust with time through the
+#: entry, where both channels carry at least ``ENTRY_LOADED`` of their entry peak, must pass this
+#: with one sign in the simulation and with the other in the recording.
+RATIO_TREND = 0.6
+ENTRY_LOADED = 0.15
 #: Least absolute rate correlation at which a negative sign is read as a polarity.
 MIN_CORRELATION = 0.3
 #: A channel's extreme value held this many samples, some of them in a run of ``MIN_RUN``, is a
@@ -119,24 +125,43 @@ def _level_ratio(t: np.ndarray, x: np.ndarray, sim: np.ndarray) -> float:
     percent, a unit mistake by a factor."""
     peak = max(float(np.max(np.abs(sim))), 1e-12)
     loaded = np.abs(sim) > LOADED * peak
-    free = np.abs(sim) < 0.01 * peak
     if np.count_nonzero(loaded) < 10:
         return 1.0
     first, last = t[loaded][0], t[loaded][-1]
     early = loaded & (t <= first + EARLY * (last - first))
     if np.count_nonzero(early) >= 10:
         loaded = early
-    zero = np.polyval(np.polyfit(t[free], x[free], 1), t) if np.count_nonzero(free) >= 10 else np.zeros_like(x)
     level = float(np.median(sim[loaded]))
-    return float(np.median((x - zero)[loaded])) / level if level != 0 else 1.0
+    return float(np.median(_from_zero(t, x, sim)[loaded])) / level if level != 0 else 1.0
 
 
-def _shape_misfit(t: np.ndarray, x: np.ndarray, s: np.ndarray) -> float:
-    """The share of x's variance a fit x ≈ a·s + b + c·t leaves."""
-    A = np.column_stack([s, np.ones_like(s), t - t.mean()])
-    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
-    r = x - A @ coef
-    return float(r @ r) / max(float(np.sum((x - x.mean()) ** 2)), 1e-300)
+def _from_zero(t: np.ndarray, x: np.ndarray, sim: np.ndarray) -> np.ndarray:
+    """``x`` less a straight zero through the instants where ``sim`` is below 1 % of its peak (x
+    itself with fewer than 10 of them)."""
+    free = np.abs(sim) < 0.01 * max(float(np.max(np.abs(sim))), 1e-12)
+    return x - np.polyval(np.polyfit(t[free], x[free], 1), t) if np.count_nonzero(free) >= 10 else x
+
+
+def _ratio_trend(t: np.ndarray, thrust: np.ndarray, torque: np.ndarray) -> float | None:
+    """Spearman's rank correlation of torque/thrust with time over the instants where both carry
+    at least ``ENTRY_LOADED`` of their peak there; None with fewer than 10 such instants."""
+    both = (thrust > ENTRY_LOADED * thrust.max()) & (torque > ENTRY_LOADED * torque.max())
+    if np.count_nonzero(both) < 10 or thrust.max() <= 0 or torque.max() <= 0:
+        return None
+    return float(stats.spearmanr(t[both], torque[both] / thrust[both]).statistic)
+
+
+def _entry_crossed(t: np.ndarray, smooth: dict, F_sim: np.ndarray, T_sim: np.ndarray, ramp: np.ndarray) -> bool:
+    """Whether the recorded torque/thrust runs against the simulation's through the entry
+    (``ramp``): one rises (``RATIO_TREND``) while the other falls. The recorded channels are taken
+    from their zero (a straight line through the instants the simulation has unloaded)."""
+    if np.count_nonzero(ramp) < 20:
+        return False
+    recorded = [_from_zero(t, smooth[c], sim)[ramp] for c, sim in (("thrust_N", F_sim), ("torque_Nmm", T_sim))]
+    simulated, seen = _ratio_trend(t[ramp], F_sim[ramp], T_sim[ramp]), _ratio_trend(t[ramp], *recorded)
+    if simulated is None or seen is None:
+        return False
+    return abs(simulated) >= RATIO_TREND and abs(seen) >= RATIO_TREND and simulated * seen < 0
 
 
 def _distance(ratio: float, with_one: bool = True) -> tuple[float, tuple[float, str] | None]:
@@ -180,12 +205,9 @@ def check(rec: Recording, sim, correlations: tuple[float, ...]) -> tuple[Recordi
         d_crossed = sum(_distance(r)[0] for r in crossed)
         by_level = d_crossed < d_straight - math.log(SWAP_MARGIN)
         if not by_level and d_straight < 2 * math.log(SWAP_TOLERANCE):   # both pairings read plausibly:
-            entry = rec.drill.cone_length_mm / rec.feed_mm_s              # the entry's shapes decide
+            entry = rec.drill.cone_length_mm / rec.feed_mm_s              # the entry decides
             ramp = (tt >= sim.contact_s - 0.2 * entry) & (tt <= sim.contact_s + 1.3 * entry)
-            if np.count_nonzero(ramp) >= 20:
-                misfit = lambda x, y: _shape_misfit(tt[ramp], x[ramp], y[ramp])
-                by_level = (misfit(smooth["thrust_N"], T_sim) + misfit(smooth["torque_Nmm"], F_sim)
-                            < SWAP_SHAPE * (misfit(smooth["thrust_N"], F_sim) + misfit(smooth["torque_Nmm"], T_sim)))
+            by_level = _entry_crossed(tt, smooth, F_sim, T_sim, ramp)
         if d_crossed < 2 * math.log(SWAP_TOLERANCE) and by_level:
             channels["thrust_N"], channels["torque_Nmm"] = channels["torque_Nmm"], channels["thrust_N"]
             smooth["thrust_N"], smooth["torque_Nmm"] = smooth["torque_Nmm"], smooth["thrust_N"]
