@@ -91,31 +91,12 @@ def _whitened_jacobian(problem: Problem, ev: Evaluation, rows: np.ndarray) -> np
 def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarray | None = None,
         fixed: tuple[str, ...] = ()) -> Fit:
     """The optimum of ``spec`` on ``rows`` (default: the usable instants), from the layout's start
-    overridden by ``start`` (by name), with the parameters named in ``fixed`` held.
-
-    A coupling with other starting values (:attr:`~.catalogue.Layout.restarts`) that ``start`` does
-    not give (its mechanism enters the fit) is fitted from each of them as well: at zero
-    coefficients its derivative is zero, and the first step's linearisation may leave the
-    mechanism out. The lowest χ² is kept."""
+    overridden by ``start`` (by name), with the parameters named in ``fixed`` held."""
     rows = problem.usable if rows is None else rows & problem.usable
-    start, lay = start or {}, layout(problem, spec)
-    best = _descend(problem, spec, lay, start, rows, fixed)
-    for name, values in lay.restarts:
-        if name in start or name in fixed:
-            continue
-        for value in values:
-            other = _descend(problem, spec, lay, {**start, name: value}, rows, fixed)
-            if other.chi2_total < best.chi2_total:
-                best = other
-    return best
-
-
-def _descend(problem: Problem, spec: Spec, lay: ParameterLayout, start: dict, rows: np.ndarray,
-             fixed: tuple[str, ...]) -> Fit:
-    """Bounded Gauss–Newton from ``start`` (see the module docstring)."""
+    lay = layout(problem, spec)
     theta = lay.start.copy()
     for k, name in enumerate(lay.names):
-        if name in start:
+        if start and name in start:
             theta[k] = start[name]
     theta = np.clip(theta, lay.lower, lay.upper)
     free = np.array([name not in fixed for name in lay.names])

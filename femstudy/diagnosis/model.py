@@ -110,7 +110,6 @@ class ParameterLayout:
     counted_when_active: np.ndarray
     blocks: dict[str, slice] = field(default_factory=dict)      # mechanism -> slice
     scanned: float = 0.0
-    restarts: tuple[tuple[str, tuple[float, ...]], ...] = ()     # the mechanisms' (full names)
 
     def index(self, name: str) -> int:
         return self.names.index(name)
@@ -145,7 +144,7 @@ def layout(problem: Problem, spec: Spec) -> ParameterLayout:
         upper.append(1.0)
         start.append(0.0)
         counted.append(True)
-    blocks, scanned, restarts = {}, 0.0, ()
+    blocks, scanned = {}, 0.0
     for name, variant in spec.variants:
         block: Layout = MECHANISMS[name].layout(problem, variant)
         begin = len(names)
@@ -156,7 +155,6 @@ def layout(problem: Problem, spec: Spec) -> ParameterLayout:
         counted += list(block.counted_when_active)
         blocks[name] = slice(begin, len(names))
         scanned += block.scanned
-        restarts += tuple((f"{name}.{n}", values) for n, values in block.restarts)
     if spec.extra is not None:
         for c, columns in enumerate(spec.extra):
             for k in range(len(columns)):
@@ -166,7 +164,7 @@ def layout(problem: Problem, spec: Spec) -> ParameterLayout:
                 start.append(0.0)
                 counted.append(False)
     return ParameterLayout(tuple(names), np.array(lower, float), np.array(upper, float), np.array(start, float),
-                   np.array(counted, bool), blocks, scanned, restarts)
+                   np.array(counted, bool), blocks, scanned)
 
 
 def _frame(problem: Problem, shift: float, stop_tau: float, lead: np.ndarray) -> tuple[Frame, int | None]:

@@ -12,7 +12,7 @@
    :data:`MAX_SCANNED` of them, are its candidates, with the slower waves whose harmonic the best
    line may be (:func:`_distinct`): each is fitted beside the best fit of step 1, and of those
    whose fundamental is their largest line (:func:`.catalogue.feed_pulsation.slower_wave_holds`)
-   the :data:`SLOWER_KEPT` of the lowest BIC stay candidates.
+   the one of the lowest BIC stays a candidate.
 3. Every subset (2⁴ = 16 with the four mechanisms) is fitted in every combination of its members'
    candidates that is a distinct model, each started from the best fit of the subsets one
    mechanism smaller (with the friction read as fading, from the best such fit: the staying reading
@@ -37,10 +37,6 @@ from femstudy.diagnosis.problem import Problem
 MAX_SCANNED = 4
 #: Two scanned frequencies closer than this (relative) are one.
 SAME_FREQUENCY = 0.03
-#: Slower waves (the best line as one of their harmonics) that stay candidates, at most: beside a
-#: flexible clogging that takes up part of a slow wave's fundamental, the right harmonic number is
-#: not always the one of the lowest BIC.
-SLOWER_KEPT = 2
 
 
 def bic(problem: Problem, f: Fit) -> float:
@@ -121,22 +117,22 @@ def candidates(problem: Problem, baseline: Fit, pool: FitPool | None = None) -> 
     bases = [portable(base) for base in ([best] if best is not None else []) + [baseline]]
     found = iter(pool.run(_scanned, [(name, base) for name in scanning for base in bases]))
     for name in scanning:
-        out[name] = _slower_waves(problem, pool, best, name,
+        out[name] = _one_slower_wave(problem, pool, best, name,
                                      _distinct([variant for _ in bases for variant in next(found)]))
     return {name: variants for name, variants in out.items() if variants}
 
 
-def _slower_waves(problem: Problem, pool: FitPool, best: Fit | None, name: str, variants: list[Variant]) -> list[Variant]:
-    """``variants`` of the scanning mechanism ``name`` with :data:`SLOWER_KEPT` slower waves at
-    most: each is fitted beside ``best`` (the fixed mechanisms' best fit), and of those whose
-    fundamental is their largest line (:func:`.catalogue.feed_pulsation.slower_wave_holds`) the
-    ones of the lowest BIC stay (item 2 of the module docstring)."""
+def _one_slower_wave(problem: Problem, pool: FitPool, best: Fit | None, name: str, variants: list[Variant]) -> list[Variant]:
+    """``variants`` of the scanning mechanism ``name`` with one slower wave at most: each is fitted
+    beside ``best`` (the fixed mechanisms' best fit), and of those whose fundamental is their
+    largest line (:func:`.catalogue.feed_pulsation.slower_wave_holds`) the one of the lowest BIC
+    stays (item 2 of the module docstring)."""
     slower = [v for v in variants if v.get(FUNDAMENTAL_OF) is not None]
     beside = best.spec.variants if best is not None else ()
     fits = pool.fit_many([(Spec(beside + ((name, v),)), best.params() if best is not None else None) for v in slower])
-    held = sorted((bic(problem, f), k) for k, f in enumerate(fits) if slower_wave_holds(f))
-    kept = [slower[k] for _, k in held[:SLOWER_KEPT]]
-    return [v for v in variants if v.get(FUNDAMENTAL_OF) is None or any(v is x for x in kept)]
+    held = [(bic(problem, f), k) for k, f in enumerate(fits) if slower_wave_holds(f)]
+    kept = slower[min(held)[1]] if held else None
+    return [v for v in variants if v.get(FUNDAMENTAL_OF) is None or v is kept]
 
 
 def _scanned(problem: Problem, item: tuple[str, tuple]) -> list[Variant]:

@@ -55,9 +55,6 @@ RESOLUTIONS = (3, 6, 12)
 #: from near 0 (μ_w → 0) to about 20 (μ_f = 0.02 with μ_w = 0.6 on the thesis's drill).
 MIN_TORQUE_RATIO = 0.05
 MAX_TORQUE_RATIO = 20.0
-#: Starting values of k_T/R, a factor of four apart over the range: k_T is bilinear with the excess
-#: (ΔT = k_T ΔF), so a fit that starts it far from its value may stay there (:attr:`.Layout.restarts`).
-TORQUE_RATIO_STARTS = (0.5, 2.0, 8.0)
 #: Least rise of the thrust by breakthrough (fraction of F_o) that counts.
 FLOOR = 0.05
 #: What the excess may gain by falling as well as rising with depth (χ², or this share of what the
@@ -129,15 +126,11 @@ class ChipClogging:
         for name in self._leaving(problem, n):
             names.append(name)
             lower.append(0.0), upper.append(5.0), start.append(0.0), counted.append(True)
-        restarts = ()
         if problem.has_torque:
             R = problem.geometry.drill.radius_mm
             names.append("torque_per_thrust_mm")
-            lower.append(0.0), upper.append(MAX_TORQUE_RATIO * R), start.append(TORQUE_RATIO_STARTS[0] * R)
-            counted.append(False)
-            restarts = (("torque_per_thrust_mm", tuple(k * R for k in TORQUE_RATIO_STARTS[1:])),)
-        return Layout(tuple(names), np.array(lower), np.array(upper), np.array(start), np.array(counted),
-                      restarts=restarts)
+            lower.append(0.0), upper.append(MAX_TORQUE_RATIO * R), start.append(0.5 * R), counted.append(False)
+        return Layout(tuple(names), np.array(lower), np.array(upper), np.array(start), np.array(counted))
 
     def _columns(self, problem, frame, n: int) -> np.ndarray:
         """Thrust columns per coefficient (instants × k), in N per unit coefficient."""

@@ -44,10 +44,6 @@ class Layout:
     start: np.ndarray
     counted_when_active: np.ndarray
     scanned: float = 0.0          #: extra BIC cost of the variant's scanned parameters (a searched frequency)
-    #: Other starting values of a coupling whose best value is not known beforehand (name, values):
-    #: a fit the mechanism enters with its coefficients at zero sits on the coupling's saddle (its
-    #: derivative is zero there), so it is fitted from each of them too (:func:`..fit.fit`).
-    restarts: tuple[tuple[str, tuple[float, ...]], ...] = ()
 
     @property
     def size(self) -> int:
