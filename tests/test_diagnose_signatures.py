@@ -83,6 +83,21 @@ def test_a_pulsing_feed_through_the_entry_does_not_decide_whether_columns_are_sw
     np.testing.assert_array_equal(checked.thrust_N, case.recording.thrust_N)
 
 
+def test_levels_a_softening_lowers_are_not_read_as_swapped_columns_and_a_unit(tmp_path):
+    """Formbench tuning case clogging+softening 408002: as labelled the levels are 0.78 and 0.66
+    of the simulation's (a softening; no fault needed). Crossed, one read 0.89 and the other 0.26,
+    near lbf written as N, so the columns were swapped and the thrust rescaled by 4.45. When no
+    fault is needed as labelled, the entry must confirm a swap; here it does not."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from femstudy.diagnosis import inputs, sanity
+    from femstudy.recordings import read_recording
+
+    case = make_formbench_case("clogging+softening", 408_002, "tuning", tmp_path)
+    rec = read_recording(case.recording)
+    sim, correlations = inputs.on_recording_clock(inputs.read_trace(case.simulation, rec), rec)
+    assert sanity.check(rec, sim, correlations)[1] == []
+
+
 def test_a_knock_in_air_is_an_event_left_out_not_noise_nor_drift(clogging_pair, plain):
     """A knock on the fixture a second before contact: reported as an event in air, left out of the
     noise model and the fits, so the diagnosis and the noise level are the plain case's."""

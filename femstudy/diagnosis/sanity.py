@@ -16,13 +16,14 @@ by a factor:
 
 - ``swapped_channels``: with both channels, the crossed ratios (recorded thrust over simulated
   torque and the reverse) are both within :data:`SWAP_TOLERANCE` of 1 or a unit factor, and nearer
-  to them by :data:`SWAP_MARGIN` than the ratios as labelled; or, when the labelled ratios read
-  plausibly too, the entry decides (:func:`_entry_crossed`): as the cone engages, the torque grows
-  with the moment of the engaged lips and the thrust with their length, so torque over thrust
-  rises with depth. That ratio is the same whatever the feed does (a pulsing or faltering feed
-  scales both channels alike and the depth stays monotone), where the channels' own shapes are
-  not. Recorded columns whose ratio falls through the entry while the simulation's rises are
-  swapped. The channels are swapped back.
+  to them by :data:`SWAP_MARGIN` than the ratios as labelled, or the labelled ratios read
+  plausibly too. Unless the crossed ratios are clearly nearer and, as labelled, a channel is off
+  by more than :data:`SCALE_LIMIT` (a fault either way), the entry must confirm it
+  (:func:`_entry_crossed`): as the cone engages, the torque grows with the moment of the engaged
+  lips and the thrust with their length, so torque over thrust rises with depth. That ratio is
+  the same whatever the feed does (a pulsing or faltering feed scales both channels alike and the
+  depth stays monotone), where the channels' own shapes are not. Recorded columns whose ratio
+  falls through the entry while the simulation's rises are swapped. The channels are swapped back.
 - ``unit_scale``: a channel's ratio is off by more than :data:`SCALE_LIMIT` and within
   :data:`UNIT_TOLERANCE` of a unit factor (:data:`UNIT_FACTORS`: kN, daN, lbf, kgf, N·m, lbf·in
   written under another unit's name). The channel is rescaled by the factor. ``channel_scale``:
@@ -204,11 +205,14 @@ def check(rec: Recording, sim, correlations: tuple[float, ...]) -> tuple[Recordi
         d_straight = sum(_distance(r)[0] for r in straight)
         d_crossed = sum(_distance(r)[0] for r in crossed)
         by_level = d_crossed < d_straight - math.log(SWAP_MARGIN)
-        if not by_level and d_straight < 2 * math.log(SWAP_TOLERANCE):   # both pairings read plausibly:
-            entry = rec.drill.cone_length_mm / rec.feed_mm_s              # the entry decides
+        swapped = d_crossed < 2 * math.log(SWAP_TOLERANCE) and (by_level or d_straight < 2 * math.log(SWAP_TOLERANCE))
+        fault_as_labelled = any(r <= 0 or abs(math.log(r)) > math.log(SCALE_LIMIT) for r in straight)
+        if swapped and not (by_level and fault_as_labelled):
+            # both pairings read plausibly, or the labelled one needs no fault: the entry decides
+            entry = rec.drill.cone_length_mm / rec.feed_mm_s
             ramp = (tt >= sim.contact_s - 0.2 * entry) & (tt <= sim.contact_s + 1.3 * entry)
-            by_level = _entry_crossed(tt, smooth, F_sim, T_sim, ramp)
-        if d_crossed < 2 * math.log(SWAP_TOLERANCE) and by_level:
+            swapped = _entry_crossed(tt, smooth, F_sim, T_sim, ramp)
+        if swapped:
             channels["thrust_N"], channels["torque_Nmm"] = channels["torque_Nmm"], channels["thrust_N"]
             smooth["thrust_N"], smooth["torque_Nmm"] = smooth["torque_Nmm"], smooth["thrust_N"]
             findings.append(Finding("swapped_channels", "both", 1.0, "the thrust and torque columns are swapped: each "
