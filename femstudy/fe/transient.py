@@ -329,11 +329,19 @@ class _Basis:
 
 
 class _Search:
-    """A march's blocks: each one's indicator, the best march so far, the seconds spent."""
+    """A march's blocks: each one's indicator, the best march so far, the seconds spent (a
+    stopwatch started with the search, read by :meth:`lap`)."""
 
     def __init__(self, rtol: float, **counts):
         self.rtol, self.best, self.history = rtol, None, []
         self.timings = {"basis_s": 0.0, "march_s": 0.0, "check_s": 0.0, **counts}
+        self._last = time.perf_counter()
+
+    def lap(self, key: str) -> None:
+        """Add the seconds since the last lap (or the start) to ``timings[key]``."""
+        now = time.perf_counter()
+        self.timings[key] += now - self._last
+        self._last = now
 
     def offer(self, indicator: float, result) -> bool:
         """Record a block's indicator, keeping ``result()`` if it is the best yet; True when
@@ -363,9 +371,7 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
     force.append(P)
     shift.append(static_shapes)
     search = _Search(rtol)
-    timings = search.timings
     for _ in range(max_blocks):
-        block_start = time.perf_counter()
         added = basis.add(fs, new)
         if added is None:
             break
@@ -373,15 +379,13 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
         new = fs.factor.solve(MQ)  # K⁻¹M Q: the next block, and the indicator's K⁻¹MV
         force.append(np.hstack([MQ, KQ]))
         shift.append(np.hstack([new, Q]))
-        march_start = time.perf_counter()
-        timings["basis_s"] += march_start - block_start
+        search.lap("basis_s")
         y, vy, ay, Z = basis.march(P, A, dt, damping, state)
-        check_start = time.perf_counter()
+        search.lap("march_s")
         residual = float(np.linalg.norm(force.R @ Z, axis=0).max() / load_norm)
         indicator = float(np.linalg.norm(shift.R @ Z, axis=0).max()
                           / max(np.linalg.norm(y, axis=0).max(), np.finfo(float).tiny))
-        timings["march_s"] += check_start - march_start
-        timings["check_s"] += time.perf_counter() - check_start
+        search.lap("check_s")
         if search.offer(indicator, lambda: basis.result(y, vy, ay, residual, indicator)):
             break
     return search.finish()
@@ -403,15 +407,13 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
     basis = _Basis(len(P), capacity)
     # the residuals' directions G = [P, MQ0, KQ0, …] = Q_G R_G, and X = K̃⁻¹Q_G = Q_X R_X
     force, error = GrowingQR(len(P), 2 * capacity + k), GrowingQR(len(P), 2 * capacity + k)
-    start = time.perf_counter()
+    search = _Search(rtol, substitutions=1)
+    timings = search.timings
     force.append(P)
     error.append(fs.factor.approximate(force.Q[:, :force.rows]))
-    search = _Search(rtol, substitutions=1, columns=force.rows)
-    timings = search.timings
+    timings["columns"] = force.rows
     new = np.column_stack([error.Q[:, :error.rows] if static_shapes is None else static_shapes] + initial)
-    timings["basis_s"] += time.perf_counter() - start
     for _ in range(max_blocks):
-        block_start = time.perf_counter()
         added = basis.add(fs, new)
         if added is None:
             break
@@ -422,10 +424,9 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
             error.append(fs.factor.approximate(force.Q[:, rows:force.rows]))
             timings["substitutions"] += 1
             timings["columns"] += force.rows - rows
-        march_start = time.perf_counter()
-        timings["basis_s"] += march_start - block_start
+        search.lap("basis_s")
         y, vy, ay, Z = basis.march(P, A, dt, damping, state)
-        check_start = time.perf_counter()
+        search.lap("march_s")
         # with the static problem K s = P (no mass) beside the steps when the march finds its shapes
         columns, scale = [Z], [np.full(Z.shape[1], max(np.linalg.norm(y, axis=0).max(), tiny))]
         if static_shapes is None:
@@ -437,8 +438,7 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
         D = (error.R @ C) / np.concatenate(scale)  # K̃⁻¹ of each, in Q_X's, relative to its answer
         residual = float(np.linalg.norm(C[:, :Z.shape[1]], axis=0).max() / load_norm)
         indicator = float(np.linalg.norm(D, axis=0).max())
-        timings["march_s"] += check_start - march_start
-        timings["check_s"] += time.perf_counter() - check_start
+        search.lap("check_s")
         def result():
             shapes = basis.basis @ shapes_r if static_shapes is None else static_shapes
             return basis.result(y, vy, ay, residual, indicator, shapes)
