@@ -127,20 +127,29 @@ def test_pardiso_takes_node_blocks_or_entries_and_refuses_an_indefinite_matrix(p
     handle.release()
 
 
+@pytest.mark.parametrize("mkl", [True, False])
 @pytest.mark.parametrize("threads", [1, 2])
-def test_restricted_product_column_by_column_equals_the_block_product(threads):
-    """Several columns go one by one, in threads where MKL may use them: the same numbers as
-    the restricted block times the whole block of columns."""
+def test_restricted_product_equals_the_restricted_block_times_the_columns(threads, mkl, monkeypatch):
+    """MKL's product of all columns at once, or (without MKL) scipy's column by column in
+    threads: the same numbers as the restricted block times the whole block of columns, for
+    node blocks (K, BSR) and entries (the nodal mass, CSR)."""
     from threadpoolctl import threadpool_limits
 
+    from femstudy.fe import sparse_products
+
+    if mkl and sparse_products._mkl_product() is None:
+        pytest.skip("MKL's sparse BLAS (sparse_dot_mkl) not installed")
+    if not mkl:
+        monkeypatch.setattr(sparse_products, "_mkl_product", lambda: None)
     rng = np.random.default_rng(3)
     A = sp.random(60, 60, density=0.2, random_state=4, format="csr")
-    A = (A + A.T).tobsr(blocksize=(3, 3))
+    A = A + A.T
     positions = np.sort(rng.choice(60, 45, replace=False))
     X = rng.standard_normal((45, 3))
     expected = A.toarray()[np.ix_(positions, positions)] @ X
-    with threadpool_limits(threads):
-        got = linsolve.restricted_product(A, positions, X)
-    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13 * np.abs(expected).max())
-    np.testing.assert_allclose(linsolve.restricted_product(A, positions, X[:, 1]), expected[:, 1],
-                               rtol=0, atol=1e-13 * np.abs(expected).max())
+    for matrix in (A.tobsr(blocksize=(3, 3)), A.tocsr()):
+        with threadpool_limits(threads):
+            got = linsolve.restricted_product(matrix, positions, X)
+        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13 * np.abs(expected).max())
+        np.testing.assert_allclose(linsolve.restricted_product(matrix, positions, X[:, 1]), expected[:, 1],
+                                   rtol=0, atol=1e-13 * np.abs(expected).max())

@@ -283,7 +283,7 @@ def _assemble(mesh: TetMesh, materials: BoneMaterials, order: int, long_axis) ->
     batch = max(CHUNK, nnzb // nbf ** 2)
     for start in range(0, len(cells), batch):
         part = np.arange(start, min(start + batch, len(cells)))
-        n, pairs = len(part), len(part) * nbf * nbf
+        pairs = len(part) * nbf * nbf
         invJ, det = jacobians(skmesh.p.T, skmesh.t.T[part])
         Ke = element_stiffness(S, invJ, det, C[mats.index[part]])
         Me = (mats.density[part] * np.abs(det))[:, None, None] * ref.mass

@@ -24,12 +24,12 @@ import importlib.util
 import logging
 import time
 import warnings
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import scipy.sparse as sp
 
 from femstudy.errors import UserError, require
+from femstudy.fe import pardiso, sparse_products
 
 log = logging.getLogger(__name__)
 
@@ -75,8 +75,6 @@ def load_runtimes() -> None:
     """Load the runtime libraries of the installed direct solvers (MKL for PARDISO), so that a
     thread limit set now (threadpoolctl) reaches them too."""
     if "pardiso" in available():
-        from femstudy.fe import pardiso
-
         pardiso.load()
 
 
@@ -210,27 +208,9 @@ def padded(x: np.ndarray, positions: np.ndarray, n: int) -> np.ndarray:
 
 
 def restricted_product(A, positions: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """A[positions][:, positions] @ X without forming that block: A times X padded with zeros.
-
-    Several columns are multiplied one by one, in as many threads as MKL may use (scipy's
-    sparse products release the GIL): scipy's product with a block of columns is slower than
-    column by column (two columns on the 3.5 mm femur's K: 0.17 s, against 0.12 s one after
-    the other and 0.08 s in two threads)."""
-    def product(x: np.ndarray) -> np.ndarray:
-        return (A @ padded(x, positions, A.shape[0]))[positions]
-
-    if X.ndim == 1 or X.shape[1] <= 1:
-        return product(X)
-    from femstudy.fe.pardiso import max_threads
-
-    out = np.empty(X.shape)
-
-    def column(j: int) -> None:
-        out[:, j] = product(X[:, j])
-
-    with ThreadPoolExecutor(min(X.shape[1], max_threads())) as pool:
-        list(pool.map(column, range(X.shape[1])))
-    return out
+    """A[positions][:, positions] @ X without forming that block: A times X padded with zeros
+    (:func:`femstudy.fe.sparse_products.times`: MKL's product of all columns at once)."""
+    return sparse_products.times(A, padded(X, positions, A.shape[0]))[positions]
 
 
 class Restriction:
@@ -326,7 +306,6 @@ class PardisoFactor(Factor):
         self.setup_s = time.perf_counter() - start
 
     def _make(self, dtype, memory_limit_bytes: float | None) -> None:
-        from femstudy.fe import pardiso
         self.close()
         # iparm (1-based): 2 = 3: METIS nested dissection ordering run in parallel (the default
         # femur's analysis 1.4–1.5 s against 2.0 s serial, same factor); 8 = 0: no iterative

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from femstudy.fe import linsolve
+from femstudy.fe import linsolve, sparse_products
 from femstudy.fe.assembly import FESystem
 from femstudy.fe.constraints import Constraints
 from femstudy.fe.kept import KeptSolutions
@@ -89,7 +89,7 @@ class FactorizedSystem:
         (M = M_nodes ⊗ I₃: a ninth of M's entries to read)."""
         full = linsolve.padded(x_free, self.bc.free, self.system.n_dofs)
         nodal = full.reshape(self.system.M_nodes.shape[0], -1)  # a node's 3 (× k) values per row
-        return (self.system.M_nodes @ nodal).reshape(full.shape)[self.bc.free]
+        return sparse_products.times(self.system.M_nodes, nodal).reshape(full.shape)[self.bc.free]
 
     def near_null_space(self) -> np.ndarray:
         """Rigid-body modes restricted to the free DOFs (for AMG)."""
