@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.blas
 
 
 def orthonormal_complement(V: np.ndarray, W: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
@@ -16,13 +17,45 @@ def orthonormal_complement(V: np.ndarray, W: np.ndarray, rtol: float = 1e-12) ->
     return U[:, sigma > rtol * scale]
 
 
+#: Condition number of a block's column-scaled Gram matrix up to which :func:`thin_svd` goes
+#: through it (κ² ≤ 1e10: its eigenvalues then hold ~6 digits, and the second pass restores
+#: orthogonality to round-off); beyond, through Householder QR.
+GRAM_CONDITION = 1e10
+
+
 def thin_svd(W: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """W = U diag(σ) Vᵀ for a tall W (n × b, b small), through its Householder QR and the SVD
-    of the b × b factor: as accurate, and faster than LAPACK's SVD of the tall matrix (0.34 M × 8
-    on one thread: 20 + 2 ms against 33 ms for scipy's and 64–73 ms for numpy's)."""
+    """W = U diag(σ) Vᵀ for a tall W (n × b, b small).
+
+    Through the Gram matrix of W's columns scaled to unit size (D the column norms):
+    (WD⁻¹)ᵀ(WD⁻¹) = V₁Λ₁V₁ᵀ gives U₁ = WD⁻¹V₁Λ₁^-½, whose own Gram matrix V₂Λ₂V₂ᵀ gives the
+    orthonormal U₂ = U₁V₂Λ₂^-½ and W = U₂T with T = Λ₂^½V₂ᵀΛ₁^½V₁ᵀD; the SVD of the b × b T
+    finishes it. Four passes over W (two Gram products, two products with b × b matrices)
+    instead of Householder's QR and its Q: 110 k × 8 on one thread, 4 ms against 12 ms. The
+    scaling makes columns of very different sizes (MQ and KQ) as easy as equal ones; only
+    nearly dependent directions (scaled condition above √:data:`GRAM_CONDITION`, or a zero
+    column) go through Householder QR and the SVD of its R."""
+    U = _gram_svd(W)
+    if U is not None:
+        return U
     Q, R = scipy.linalg.qr(W, mode="economic", check_finite=False)
     U, sigma, Vt = np.linalg.svd(R)
     return Q @ U, sigma, Vt
+
+
+def _gram_svd(W: np.ndarray):
+    """:func:`thin_svd` through Gram matrices; None when W is too ill-conditioned for them."""
+    gram = W.T @ W
+    d = np.sqrt(np.diag(gram))
+    if not np.all(d > 0):
+        return None
+    lam1, V1 = np.linalg.eigh(gram / np.outer(d, d))
+    if lam1[0] * GRAM_CONDITION < lam1[-1]:
+        return None
+    U1 = W @ (V1 / d[:, None] / np.sqrt(lam1))
+    lam2, V2 = np.linalg.eigh(U1.T @ U1)
+    T = (np.sqrt(lam2)[:, None] * V2.T) @ (np.sqrt(lam1)[:, None] * V1.T * d)
+    Ut, sigma, Vt = np.linalg.svd(T)
+    return U1 @ (V2 / np.sqrt(lam2) @ Ut), sigma, Vt
 
 
 def symmetric(A: np.ndarray) -> np.ndarray:
@@ -60,18 +93,19 @@ class GrowingQR:
 
     def append(self, W: np.ndarray) -> None:
         Q, rows, cols, b = self.Q[:, :self.rows], self.rows, self.cols, W.shape[1]
-        sizes = np.linalg.norm(W, axis=0)
+        W = np.array(W, dtype=float, order="F")  # a copy, worked on in place
+        sizes = np.sqrt(np.einsum("ij,ij->j", W, W))
         sizes[sizes == 0] = 1.0
-        W = W / sizes
+        W /= sizes
         C = np.zeros((rows, b))
-        for _ in range(2):
+        for _ in range(2 if rows else 0):
             step = Q.T @ W
-            W = W - Q @ step
+            W = scipy.linalg.blas.dgemm(-1.0, Q, step, 1.0, W, overwrite_c=True)  # W −= Q step, no temporary
             C += step
         U, sigma, Vt = thin_svd(W)
         keep = sigma > 1e-12
         k = int(keep.sum())
-        self.Q[:, rows:rows + k] = U[:, keep]
+        self.Q[:, rows:rows + k] = U if k == b else U[:, keep]
         self._R[:rows, cols:cols + b] = C * sizes
         self._R[rows:rows + k, cols:cols + b] = sigma[keep, None] * Vt[keep] * sizes
         self.rows, self.cols = rows + k, cols + b
