@@ -93,8 +93,10 @@ def test_single_precision_factor_refines_to_the_double_precision_answer(problem)
 def test_a_stalled_refinement_factorises_again_in_double_precision(problem, monkeypatch, caplog):
     K, b, B = problem
     factor = linsolve.factorize(K, "pardiso", precision="single")
-    monkeypatch.setattr(linsolve, "REFINE_RTOL", 0.0)   # never converged ...
-    monkeypatch.setattr(linsolve, "REFINE_FLOOR", 0.0)  # ... so it stalls at round-off
+    # never converged, not even by a correction of exactly zero, so it stalls at round-off
+    # (or runs out of steps)
+    monkeypatch.setattr(linsolve, "REFINE_RTOL", -1.0)
+    monkeypatch.setattr(linsolve, "REFINE_FLOOR", -1.0)
     with caplog.at_level(logging.WARNING, logger="femstudy"):
         x = factor.solve(b)
     assert "factorising in double precision" in caplog.text and factor.precision == "double"
@@ -153,3 +155,22 @@ def test_restricted_product_equals_the_restricted_block_times_the_columns(thread
         np.testing.assert_allclose(got, expected, rtol=0, atol=1e-13 * np.abs(expected).max())
         np.testing.assert_allclose(linsolve.restricted_product(matrix, positions, X[:, 1]), expected[:, 1],
                                    rtol=0, atol=1e-13 * np.abs(expected).max())
+
+
+@pytest.mark.skipif("pardiso" not in linsolve.available(), reason="MKL (PARDISO) not installed")
+@pytest.mark.parametrize("columns", [2, 3])
+def test_two_or_three_columns_substituted_as_one_or_four_give_each_column_its_own_answer(problem, columns):
+    """Two columns go one at a time and three as four (PARDISO runs 2–3 columns in one
+    thread): each column's answer is the one-column substitution's, to single precision."""
+    from threadpoolctl import threadpool_limits
+
+    K, _, _ = problem
+    B = np.random.default_rng(5).standard_normal((K.shape[0], columns))
+    factor = linsolve.factorize(K, "pardiso", precision="single")
+    for threads in (1, 2):
+        with threadpool_limits(threads):
+            X = factor.approximate(B)
+        assert X.shape == B.shape and X.dtype == np.float64
+        for j in range(columns):
+            alone = factor.approximate(B[:, j])
+            np.testing.assert_allclose(X[:, j], alone, rtol=0, atol=1e-5 * np.abs(alone).max())

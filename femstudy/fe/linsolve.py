@@ -336,7 +336,18 @@ class PardisoFactor(Factor):
         return self._refined(b, self._substitute(b), REFINE_RTOL)
 
     def _substitute(self, b):
-        """L̃⁻ᵀL̃⁻¹b, in double precision: one substitution with the factor."""
+        """L̃⁻ᵀL̃⁻¹b, in double precision: one substitution with the factor.
+
+        PARDISO runs a substitution of two or three columns in one thread, while it spreads
+        one column, or four and more, over its threads (16 mm femur, 2 threads: 20, 48, 54 and
+        42 ms for 1, 2, 3 and 4 columns; 5 mm: 99, 245, 269, 201 ms; one thread: 43, 51, 59,
+        68 ms). With more than one thread, two columns therefore go one at a time and three
+        as four (a zero column added)."""
+        columns = 1 if b.ndim == 1 else b.shape[1]
+        if columns in (2, 3) and pardiso.max_threads() > 1:
+            if columns == 2:
+                return np.column_stack([self._handle.solve(b[:, j]) for j in range(2)]).astype(float)
+            return self._handle.solve(np.column_stack([b, np.zeros(len(b))]))[:, :3].astype(float)
         return self._handle.solve(b).astype(float)
 
     def _refined(self, b, x, rtol):
