@@ -10,11 +10,22 @@ import scipy.linalg.blas
 def orthonormal_complement(V: np.ndarray, W: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
     """Orthonormal columns spanning what W adds to span(V) (V orthonormal); directions under
     ``rtol`` of W's own size are round-off and dropped."""
-    scale = np.linalg.norm(W, axis=0).max()
-    for _ in range(2):  # classical Gram–Schmidt twice is orthogonal to working precision
-        W = W - V @ (V.T @ W)
+    scale = np.sqrt(np.einsum("ij,ij->j", W, W)).max()
+    W, _ = project_out(V, W)
     U, sigma, _ = thin_svd(W)
     return U[:, sigma > rtol * scale]
+
+
+def project_out(Q: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(W − Q C, C) with C = QᵀW for an orthonormal Q, by classical Gram–Schmidt twice (orthogonal
+    to working precision), on a column-major copy of W updated in place (BLAS dgemm)."""
+    W = np.array(W, dtype=float, order="F")
+    C = np.zeros((Q.shape[1], W.shape[1]))
+    for _ in range(2 if Q.shape[1] else 0):
+        step = Q.T @ W
+        W = scipy.linalg.blas.dgemm(-1.0, Q, step, 1.0, W, overwrite_c=True)
+        C += step
+    return W, C
 
 
 #: Condition number of a block's column-scaled Gram matrix up to which :func:`thin_svd` goes
@@ -93,15 +104,9 @@ class GrowingQR:
 
     def append(self, W: np.ndarray) -> None:
         Q, rows, cols, b = self.Q[:, :self.rows], self.rows, self.cols, W.shape[1]
-        W = np.array(W, dtype=float, order="F")  # a copy, worked on in place
         sizes = np.sqrt(np.einsum("ij,ij->j", W, W))
         sizes[sizes == 0] = 1.0
-        W /= sizes
-        C = np.zeros((rows, b))
-        for _ in range(2 if rows else 0):
-            step = Q.T @ W
-            W = scipy.linalg.blas.dgemm(-1.0, Q, step, 1.0, W, overwrite_c=True)  # W −= Q step, no temporary
-            C += step
+        W, C = project_out(Q, W / sizes)
         U, sigma, Vt = thin_svd(W)
         keep = sigma > 1e-12
         k = int(keep.sum())
