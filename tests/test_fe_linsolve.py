@@ -132,9 +132,9 @@ def test_pardiso_takes_node_blocks_or_entries_and_refuses_an_indefinite_matrix(p
 @pytest.mark.parametrize("mkl", [True, False])
 @pytest.mark.parametrize("threads", [1, 2])
 def test_restricted_product_equals_the_restricted_block_times_the_columns(threads, mkl, monkeypatch):
-    """MKL's product of all columns at once, or (without MKL) scipy's column by column in
-    threads: the same numbers as the restricted block times the whole block of columns, for
-    node blocks (K, BSR) and entries (the nodal mass, CSR)."""
+    """MKL's product of all columns at once, or (without MKL) scipy's column by column: the
+    same numbers as the restricted block times the whole block of columns, for node blocks (K,
+    BSR) and entries (the nodal mass, CSR), whatever the thread limit."""
     from threadpoolctl import threadpool_limits
 
     from femstudy.fe import sparse_products

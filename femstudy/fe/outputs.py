@@ -114,7 +114,8 @@ def _evaluate(W: np.ndarray, Y: np.ndarray, steps: np.ndarray, masks: dict):
         for name, mask in masks.items():
             sub = squares if everywhere[name] else np.where(mask, squares, -np.inf)
             k = sub.argmax(axis=1)
-            best[name][0][start:start + len(cols)] = np.sqrt(sub[np.arange(len(cols)), k])
+            peak = sub[np.arange(len(cols)), k]
+            best[name][0][start:start + len(cols)] = np.sqrt(peak, out=peak, where=peak >= 0)  # −∞: an empty mask
             best[name][1][start:start + len(cols)] = k
     return best
 

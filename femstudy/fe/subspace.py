@@ -45,9 +45,9 @@ def thin_svd(W: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     scaling makes columns of very different sizes (MQ and KQ) as easy as equal ones; only
     nearly dependent directions (scaled condition above √:data:`GRAM_CONDITION`, or a zero
     column) go through Householder QR and the SVD of its R."""
-    U = _gram_svd(W)
-    if U is not None:
-        return U
+    through_gram = _gram_svd(W)
+    if through_gram is not None:
+        return through_gram
     Q, R = scipy.linalg.qr(W, mode="economic", check_finite=False)
     U, sigma, Vt = np.linalg.svd(R)
     return Q @ U, sigma, Vt
