@@ -324,7 +324,8 @@ class _Basis:
         return y, vy, ay, Z
 
     def result(self, y, vy, ay, residual: float, indicator: float, static_shapes=None) -> _ReducedMarch:
-        return _ReducedMarch(self.basis.copy(), y, vy, ay, symmetric(self.Kr), symmetric(self.Mr), residual, indicator,
+        # V's first m columns stay as they are while later blocks are appended: a view, not a copy
+        return _ReducedMarch(self.basis, y, vy, ay, symmetric(self.Kr), symmetric(self.Mr), residual, indicator,
                              {}, static_shapes)
 
 
