@@ -109,7 +109,7 @@ class MeshLocator:
         they are then outside (the quick test of :meth:`inside`)."""
         from scipy.spatial import cKDTree
 
-        system, mesh = self.system, self.system.mesh
+        mesh = self.system.mesh
         element = np.asarray(self._grid.find_containing_cell(points), dtype=np.int64).reshape(-1)
         missed = element < 0
         if search_missed and missed.any():

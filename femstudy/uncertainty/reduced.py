@@ -182,7 +182,6 @@ def build(family: StiffnessFamily, clamp_length_mm: float, moduli: list, solver:
             AinvW = np.hstack([AinvW, fs.factor.solve(np.hstack([(family.K_c @ new)[free], (family.K_s @ new)[free]]))])
 
         def assemble_basis() -> ClampBasis:
-            r = V.shape[1]
             KcV, KsV = family.K_c @ V, family.K_s @ V
             W = np.hstack([KcV[free], KsV[free], P])
             # AinvW holds the columns in the order they were added: [Kc v1, Ks v1, Kc v2, ...] per block
