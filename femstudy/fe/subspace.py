@@ -10,10 +10,15 @@ import scipy.linalg.blas
 def orthonormal_complement(V: np.ndarray, W: np.ndarray, rtol: float = 1e-12) -> np.ndarray:
     """Orthonormal columns spanning what W adds to span(V) (V orthonormal); directions under
     ``rtol`` of W's own size are round-off and dropped."""
-    scale = np.sqrt(np.einsum("ij,ij->j", W, W)).max()
+    scale = column_norms(W).max()
     W, _ = project_out(V, W)
     U, sigma, _ = thin_svd(W)
     return U[:, sigma > rtol * scale]
+
+
+def column_norms(W: np.ndarray) -> np.ndarray:
+    """The 2-norm of every column of W (one pass, no temporary of W's size)."""
+    return np.sqrt(np.einsum("ij,ij->j", W, W))
 
 
 def project_out(Q: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -104,7 +109,7 @@ class GrowingQR:
 
     def append(self, W: np.ndarray) -> None:
         Q, rows, cols, b = self.Q[:, :self.rows], self.rows, self.cols, W.shape[1]
-        sizes = np.sqrt(np.einsum("ij,ij->j", W, W))
+        sizes = column_norms(W)
         sizes[sizes == 0] = 1.0
         W, C = project_out(Q, W / sizes)
         U, sigma, Vt = thin_svd(W)
