@@ -62,3 +62,25 @@ def test_growing_qr_keeps_the_norm_of_every_combination_of_its_columns():
     z[:6] = np.linalg.lstsq(np.hstack(blocks[:2]), inside[:, 0], rcond=None)[0]
     z[6] = -1.0
     assert np.linalg.norm(qr.R @ z) < 1e-12 * np.linalg.norm(inside[:, 0])
+
+
+@pytest.mark.parametrize("nearly_inside", [False, True])
+def test_growing_gram_keeps_the_norm_of_every_combination_and_combines_orthonormally(nearly_inside):
+    """‖X c‖ = ‖R c‖ and X R⁻¹ orthonormal, for blocks of graded sizes (K̃⁻¹ of [P, MQ, KQ]
+    directions); a block 1e-7 from the earlier span is beyond the Gram matrix and goes through
+    Householder QR, with the same guarantees."""
+    rng = np.random.default_rng(5)
+    blocks = [rng.standard_normal((N, 2)), rng.standard_normal((N, 4)) * np.logspace(0, -8, 4)]
+    third = rng.standard_normal((N, 3))
+    if nearly_inside:
+        third[:, 0] = blocks[0][:, 0] + 1e-7 * rng.standard_normal(N)
+    blocks.append(third)
+    gram = subspace.GrowingGram(N, 12)
+    for block in blocks:
+        gram.append(block)
+    X = np.hstack(blocks)
+    assert gram.cols == 9 and gram.R.shape == (9, 9)
+    C = rng.standard_normal((9, 20))
+    np.testing.assert_allclose(np.linalg.norm(gram.R @ C, axis=0), np.linalg.norm(X @ C, axis=0), rtol=1e-9)
+    Q = gram.combine(np.eye(9))
+    np.testing.assert_allclose(Q.T @ Q, np.eye(9), rtol=0, atol=1e-6 if nearly_inside else 1e-9)

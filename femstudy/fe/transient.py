@@ -32,7 +32,7 @@ the full equations:
    r = M a + C v + K u − f, and the displacement it stands for, K⁻¹ r, relative to the
    largest displacement — the error indicator. Both norms come exactly, for all steps at
    once, from a QR factorisation of [MV, KV, P] and of [K⁻¹MV, V, K⁻¹P] (‖G z‖ = ‖R z‖); on
-   an approximate factor the indicator is ‖K̃⁻¹r‖ (through X's QR), within the factor's
+   an approximate factor the indicator is ‖K̃⁻¹r‖ (through X's Gram matrix), within the factor's
    contraction of the exact one.
    Blocks are added until the indicator is below :data:`INDICATOR_RTOL` or stops falling;
    the march is accepted below :data:`ACCEPT_RTOL`. Otherwise K̂ is factorised and the model
@@ -61,7 +61,7 @@ import scipy.sparse as sp
 from femstudy.errors import require
 from femstudy.fe import linsolve
 from femstudy.fe.static import FactorizedSystem
-from femstudy.fe.subspace import GrowingQR, grow_projection, orthonormal_complement, symmetric
+from femstudy.fe.subspace import GrowingGram, GrowingQR, grow_projection, orthonormal_complement, symmetric
 
 log = logging.getLogger(__name__)
 
@@ -406,14 +406,15 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
     widest = max(MIN_DIRECTIONS, 2 * k)
     capacity = k + len(initial) + widest * max_blocks
     basis = _Basis(len(P), capacity)
-    # the residuals' directions G = [P, MQ0, KQ0, …] = Q_G R_G, and X = K̃⁻¹Q_G = Q_X R_X
-    force, error = GrowingQR(len(P), 2 * capacity + k), GrowingQR(len(P), 2 * capacity + k)
+    # the residuals' directions G = [P, MQ0, KQ0, …] = Q_G R_G (a QR: the residuals cancel in
+    # it), and X = K̃⁻¹Q_G = Q_X R_X (through XᵀX: nothing cancels in X times R_G z)
+    force, error = GrowingQR(len(P), 2 * capacity + k), GrowingGram(len(P), 2 * capacity + k)
     search = _Search(rtol, substitutions=1)
     timings = search.timings
     force.append(P)
     error.append(fs.factor.approximate(force.Q[:, :force.rows]))
     timings["columns"] = force.rows
-    new = np.column_stack([error.Q[:, :error.rows] if static_shapes is None else static_shapes] + initial)
+    new = np.column_stack([error.X[:, :error.cols] if static_shapes is None else static_shapes] + initial)
     for _ in range(max_blocks):
         added = basis.add(fs, new)
         if added is None:
@@ -448,7 +449,7 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
             break
         # the next block: the error's principal directions that matter for the target
         U, sigma, _ = np.linalg.svd(D, full_matrices=False)
-        new = error.Q[:, :error.rows] @ U[:, :min(int(np.sum(sigma >= DIRECTION_SHARE * rtol)), widest)]
+        new = error.combine(U[:, :min(int(np.sum(sigma >= DIRECTION_SHARE * rtol)), widest)])
     return search.finish()
 
 
