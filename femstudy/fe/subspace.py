@@ -23,8 +23,13 @@ def column_norms(W: np.ndarray) -> np.ndarray:
 
 def project_out(Q: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(W − Q C, C) with C = QᵀW for an orthonormal Q, by classical Gram–Schmidt twice (orthogonal
-    to working precision), on a column-major copy of W updated in place (BLAS dgemm)."""
-    W = np.array(W, dtype=float, order="F")
+    to working precision), on a column-major copy of W (:func:`project_out_in_place`)."""
+    return project_out_in_place(Q, np.array(W, dtype=float, order="F"))
+
+
+def project_out_in_place(Q: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`project_out` overwriting W, which must be column-major float64 (BLAS dgemm
+    updates it in place)."""
     C = np.zeros((Q.shape[1], W.shape[1]))
     for _ in range(2 if Q.shape[1] else 0):
         step = Q.T @ W
@@ -107,11 +112,18 @@ class GrowingQR:
     def R(self) -> np.ndarray:
         return self._R[:self.rows, :self.cols]
 
-    def append(self, W: np.ndarray) -> None:
-        Q, rows, cols, b = self.Q[:, :self.rows], self.rows, self.cols, W.shape[1]
-        sizes = column_norms(W)
+    def append(self, *blocks: np.ndarray) -> None:
+        """Add the columns of ``blocks`` (each n × b_i), in order: e.g. MQ and KQ, not stacked first."""
+        Q, rows, cols = self.Q[:, :self.rows], self.rows, self.cols
+        sizes = np.concatenate([column_norms(B) for B in blocks])
         sizes[sizes == 0] = 1.0
-        W, C = project_out(Q, W / sizes)
+        b = len(sizes)
+        # brought to unit size where Q's next columns will be, and orthogonalised there
+        W, start = self.Q[:, rows:rows + b], 0
+        for B in blocks:
+            np.divide(B, sizes[start:start + B.shape[1]], out=W[:, start:start + B.shape[1]])
+            start += B.shape[1]
+        W, C = project_out_in_place(Q, W)
         U, sigma, Vt = thin_svd(W)
         keep = sigma > 1e-12
         k = int(keep.sum())

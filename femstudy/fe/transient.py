@@ -378,8 +378,8 @@ def reduced_march(fs: FactorizedSystem, P, A, dt, damping, state, static_shapes,
             break
         Q, KQ, MQ = added
         new = fs.factor.solve(MQ)  # K⁻¹M Q: the next block, and the indicator's K⁻¹MV
-        force.append(np.hstack([MQ, KQ]))
-        shift.append(np.hstack([new, Q]))
+        force.append(MQ, KQ)
+        shift.append(new, Q)
         search.lap("basis_s")
         y, vy, ay, Z = basis.march(P, A, dt, damping, state)
         search.lap("march_s")
@@ -421,7 +421,7 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
             break
         _, KQ, MQ = added
         rows = force.rows
-        force.append(np.hstack([MQ, KQ]))
+        force.append(MQ, KQ)
         if force.rows > rows:
             error.append(fs.factor.approximate(force.Q[:, rows:force.rows]))
             timings["substitutions"] += 1
