@@ -65,10 +65,13 @@ def test_growing_qr_keeps_the_norm_of_every_combination_of_its_columns():
 
 
 @pytest.mark.parametrize("nearly_inside", [False, True])
-def test_growing_gram_keeps_the_norm_of_every_combination_and_combines_orthonormally(nearly_inside):
+def test_growing_gram_keeps_the_norm_of_every_combination_and_combines_orthonormally(nearly_inside, monkeypatch):
     """‖X c‖ = ‖R c‖ and X R⁻¹ orthonormal, for blocks of graded sizes (K̃⁻¹ of [P, MQ, KQ]
     directions); a block 1e-7 from the earlier span is beyond the Gram matrix and goes through
     Householder QR, with the same guarantees."""
+    householder = []
+    qr = subspace.scipy.linalg.qr
+    monkeypatch.setattr(subspace.scipy.linalg, "qr", lambda *a, **k: householder.append(1) or qr(*a, **k))
     rng = np.random.default_rng(5)
     blocks = [rng.standard_normal((N, 2)), rng.standard_normal((N, 4)) * np.logspace(0, -8, 4)]
     third = rng.standard_normal((N, 3))
@@ -80,6 +83,7 @@ def test_growing_gram_keeps_the_norm_of_every_combination_and_combines_orthonorm
         gram.append(block)
     X = np.hstack(blocks)
     assert gram.cols == 9 and gram.R.shape == (9, 9)
+    assert bool(householder) == nearly_inside  # the last block only, when it is nearly inside
     C = rng.standard_normal((9, 20))
     np.testing.assert_allclose(np.linalg.norm(gram.R @ C, axis=0), np.linalg.norm(X @ C, axis=0), rtol=1e-9)
     Q = gram.combine(np.eye(9))
