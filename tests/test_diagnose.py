@@ -147,6 +147,25 @@ def test_json_contract_names_and_types():
         assert set(u) >= {"start_s", "end_s", "channel", "description"} and u["start_s"] <= u["end_s"]
 
 
+def test_a_mechanism_below_the_naming_confidence_is_dropped_and_the_verdict_decided_again(monkeypatch):
+    import importlib
+
+    module = importlib.import_module("femstudy.diagnosis.diagnose")
+    _, d = diagnosed("clogging_under_pulsation", 7)
+    assert len(d.mechanisms) == 2 and all(m.confidence >= module.NAMING_CONFIDENCE for m in d.mechanisms)
+    weakest = d.mechanisms[-1]
+    threshold = weakest.confidence + 1e-6
+    monkeypatch.setattr(module, "NAMING_CONFIDENCE", threshold)
+    verdict, named = module.confident_verdict(d.problem, {f.subset: f for f in d.fits}, d.selection, d.baseline,
+                                              d.verdict, None, workers=1)
+    # the weakest goes first; the verdict is decided again, and whatever is still named clears the bar
+    assert weakest.mechanism not in verdict.subset and all(n.confidence >= threshold for n in named)
+    assert {n.mechanism for n in named} == verdict.subset == verdict.fit.subset
+    dropped = [r for r in verdict.replaced if "more likely wrong than right" in r.reason]
+    assert dropped[0].mechanism == weakest.mechanism and f"{weakest.confidence:.2f}" in dropped[0].reason
+    assert len(dropped) == len(d.mechanisms) - len(named)
+
+
 def test_the_result_is_typed_all_the_way_down():
     """No bare dict, list or object field in the Diagnosis: dicts exist only in to_json()."""
     import dataclasses

@@ -6,7 +6,7 @@ final residual is consistent with noise, and how far the best shape that could r
 short. :func:`confidence` maps them to a probability by a logistic model whose coefficients
 (:data:`COEFFICIENTS`) were fitted on the tuning cases of the form-randomised benchmark
 (``bench/formbench``, tuning forms and seed only); docs/diagnosis.md gives the reliability table
-measured on the held-out forms.
+measured on the held-out forms. Mechanisms below :data:`NAMING_CONFIDENCE` are not named.
 """
 
 from __future__ import annotations
@@ -35,6 +35,13 @@ class Evidence:
 #: mechanisms, 240 right; log loss 0.241 against 0.297 for a constant). Seed 1 alone held three
 #: wrong names, and its fit was over-sure on the held-out forms (0.944 right at 0.990).
 COEFFICIENTS = (-1.39, 0.429, -0.116, 0.0821, 0.72, 0.851)
+
+#: A mechanism is named only at this confidence or above: below it, it is more likely wrong than
+#: right. For the named-mechanism F1, dropping a name right with probability c removes c true and
+#: 1 − c false positives and adds c false negatives, which raises F1 exactly when c < F1/2 (about
+#: 0.45 at the F1 the benchmarks measure); a half is that bound rounded to the plain rule. What a
+#: dropped mechanism explained is left to the unexplained (``diagnose.confident_verdict``).
+NAMING_CONFIDENCE = 0.5
 
 
 def confidence(e: Evidence) -> float:

@@ -38,7 +38,7 @@ from threadpoolctl import threadpool_limits
 from femstudy.diagnosis import heldout, inputs, outside, prepare, sanity
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.catalogue import MECHANISMS
-from femstudy.diagnosis.confidence import Evidence, confidence
+from femstudy.diagnosis.confidence import NAMING_CONFIDENCE, Evidence, confidence
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.model import Spec, evaluate, layout
@@ -46,8 +46,8 @@ from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.result import (ChannelFit, ChannelNoise, Diagnosis, Mismatch, Named, ResidualCheck, Scores,
                                        Timing)
 from femstudy.diagnosis.search import bic, fit_all
-from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, residual_test, select
-from femstudy.diagnosis.verdict import decide
+from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Dropped, residual_test, select
+from femstudy.diagnosis.verdict import Verdict, decide
 from femstudy.drilling.friction import BoneSet, load_bone_set
 from femstudy.errors import require
 from femstudy.recordings.reader import Recording, read_recording
@@ -212,6 +212,39 @@ def _failed_signatures(problem: Problem, selection) -> list[outside.Unexplained]
             for d in selection.dropped for c in d.failed if c.finding]
 
 
+def named_mechanisms(problem: Problem, selection, baseline: Fit, verdict: Verdict, bone_mu_w) -> list[Named]:
+    """The verdict's mechanisms with their evidence, reading and confidence, most confident first."""
+    improved = verdict.fit
+    _, p_value = residual_test(problem, improved)
+    base_excess = _excess(problem, baseline)
+    share = 1.0 - _excess(problem, improved) / base_excess if base_excess > 0 else 1.0
+    named = []
+    for m in sorted(verdict.subset):
+        mech = MECHANISMS[m]
+        delta = selection.bic[verdict.subset - {m}] - selection.bic[verdict.subset]
+        size = mech.size(problem, improved)
+        evidence = Evidence(delta, size / mech.floor, share, p_value > RESIDUAL_P, verdict.replacement_margin.get(m))
+        named.append(Named(m, confidence(evidence), mech.reading(problem, improved, {"bone_mu_w": bone_mu_w}), delta,
+                           size, selection.inclusion.get(m, 0.0), selection.checks.get(m, ()), evidence))
+    return sorted(named, key=lambda n: -n.confidence)
+
+
+def confident_verdict(problem: Problem, fits: dict, selection, baseline: Fit, verdict: Verdict, bone_mu_w,
+                      workers: int | None = None) -> tuple[Verdict, list[Named]]:
+    """The verdict with only the mechanisms named at :data:`~.confidence.NAMING_CONFIDENCE` or
+    above: the least confident below it is dropped and the verdict decided again without it (what
+    it explained is then characterised among the unexplained), until none is below."""
+    named = named_mechanisms(problem, selection, baseline, verdict, bone_mu_w)
+    while named and named[-1].confidence < NAMING_CONFIDENCE:
+        weakest = named[-1]
+        reason = Dropped(weakest.mechanism, f"its confidence is {weakest.confidence:.2f}, below "
+                                            f"{NAMING_CONFIDENCE:g}: more likely wrong than right, so not named")
+        again = decide(problem, fits, verdict.subset - {weakest.mechanism}, selection.inflation, workers)
+        verdict = replace(again, replaced=verdict.replaced + (reason,) + again.replaced)
+        named = named_mechanisms(problem, selection, baseline, verdict, bone_mu_w)
+    return verdict, named
+
+
 def diagnose(recording, simulation=None, cortex_mm: float | None = None, bone: str | BoneSet = "bovine",
              progress=None, *, model: str | None = None, columns=None, overrides: dict | None = None,
              override_header: bool = False, bone_library: Path | None = None, workers: int | None = None) -> Diagnosis:
@@ -299,7 +332,10 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
                 problem, fits, selection = scaled, scaled_fits, scaled_selection
                 baseline = robust_baseline(problem, alignment)
             say(f"refitted with the simulated loads rescaled: {'kept' if problem.calibrate else 'not better'}")
-    verdict = decide(problem, fits, selection.subset, selection.inflation, workers)
+    bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
+    verdict, named = confident_verdict(problem, fits, selection, baseline,
+                                       decide(problem, fits, selection.subset, selection.inflation, workers),
+                                       bone_mu_w, workers)
     improved = verdict.fit
     frame = improved.evaluation.frame
     span = (frame.contact_t_s, min(frame.stop_t_s, float(t[-1])))
@@ -320,18 +356,6 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
                    + _failed_signatures(problem, selection)
                    + outside.report(problem, list(verdict.shapes), leftover, spindle, span, peaks))
     chi2_dof, p_value = residual_test(problem, improved)
-    base_excess = _excess(problem, baseline)
-    share = 1.0 - _excess(problem, improved) / base_excess if base_excess > 0 else 1.0
-    bone_mu_w = bone_set.friction(recording.feed_mm_s, recording.spindle_rpm)[1]
-    named = []
-    for m in sorted(verdict.subset):
-        mech = MECHANISMS[m]
-        delta = selection.bic[verdict.subset - {m}] - selection.bic[verdict.subset]
-        size = mech.size(problem, improved)
-        evidence = Evidence(delta, size / mech.floor, share, p_value > RESIDUAL_P, verdict.replacement_margin.get(m))
-        named.append(Named(m, confidence(evidence), mech.reading(problem, improved, {"bone_mu_w": bone_mu_w}), delta,
-                           size, selection.inclusion.get(m, 0.0), selection.checks.get(m, ()), evidence))
-    named.sort(key=lambda n: -n.confidence)
     say(f"named {len(named)} mechanism(s), {len(unexplained)} unexplained feature(s)")
     summary = summarise_fit(problem, baseline, improved)
     seconds = time.perf_counter() - start
