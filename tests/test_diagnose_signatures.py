@@ -125,19 +125,6 @@ def test_a_jump_of_the_zero_in_air_is_not_a_drift(clogging_pair):
     assert named(d) == {"chip_clogging"}
 
 
-@pytest.mark.parametrize("share, left_p, passes", [(0.74, 0.1, True), (0.95, 1e-9, True), (0.8, 1e-20, False),
-                                                    (0.89, 5e-4, False)])
-def test_a_drift_explains_the_air_when_it_leaves_noise_there_or_most_of_the_excess(plain, share, left_p, passes):
-    """``explains_air``: the load-free instants left at noise (their χ² test passes), or 90 % of
-    their excess removed; a wandering zero leaves neither."""
-    from femstudy.diagnosis.catalogue import MECHANISMS
-
-    figures = {"without_in_air": 50.0, "air_explained": share, "air_left": left_p}
-    checks = MECHANISMS["sensor_drift"].checks(plain.problem, plain.improved, lambda kind, f: figures[kind])
-    (explains,) = [c for c in checks if c.name == "explains_air"]
-    assert explains.passed is passes and explains.finding == "wandering_zero"
-
-
 @pytest.fixture(scope="module")
 def feed_pair():
     """A recording at 2.5 mm/s and 1200 rpm, and the noise-free Allotta load history of the same

@@ -20,8 +20,6 @@ Each is a refit or a restricted fit, asked for by name through :func:`refitter`:
   of either sign: the ``signed`` variant).
 - ``air_explained``: the share of what the load-free instants show beyond the noise model (their
   χ² without the mechanism less their count) that the mechanism removes.
-- ``air_left``: the p-value of the χ² test of the fit's residual on the load-free instants under
-  the noise model (whitened, one degree of freedom per instant and channel).
 - ``periodic``: what the pulsation gains over the fit without it, less what a smooth, non-periodic
   modulation of both loads gains there with as many coefficients (cubic B-splines over the cut):
   a slow misfit of another mechanism's form is as well fitted by a smooth modulation, a feed
@@ -33,7 +31,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 from scipy.interpolate import BSpline
 
 from femstudy.diagnosis.catalogue.feed_pulsation import NAME as PULSATION, waveforms
@@ -133,11 +130,6 @@ def refitter(problem, mechanism: str, without_fits: dict | None = None):
         before, after = _chi2(problem, without(f).model, rows), _chi2(problem, f.model, rows)
         return (before - after) / max(before - count, 1e-12)
 
-    def air_left(f: Fit) -> float:
-        rows = problem.air & problem.usable
-        count = np.count_nonzero(rows) * len(problem.channels)
-        return float(stats.chi2.sf(_chi2(problem, f.model, rows), max(count, 1)))
-
     def periodic(f: Fit) -> float:
         less = without(f)
         count = 2 * MECHANISMS[PULSATION].frequency(problem, f)[2]
@@ -161,7 +153,6 @@ def refitter(problem, mechanism: str, without_fits: dict | None = None):
     def signed(f: Fit) -> float:
         return f.chi2_total - fit(problem, with_setting(f, "signed"), f.params()).chi2_total
 
-    kinds = {"air_explained": air_explained, "air_left": air_left, "lead": lead, "signed": signed,
-             "separate_channels": separate, "in_air": in_air, "halves": halves, "without_in_air": without_in_air,
+    kinds = {"air_explained": air_explained, "lead": lead, "signed": signed, "separate_channels": separate, "in_air": in_air, "halves": halves, "without_in_air": without_in_air,
              "periodic": periodic, "gain": gain}
     return lambda kind, f: kinds[kind](f)
