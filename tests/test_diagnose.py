@@ -166,6 +166,26 @@ def test_a_mechanism_below_the_naming_confidence_is_dropped_and_the_verdict_deci
     assert len(dropped) == len(d.mechanisms) - len(named)
 
 
+def test_a_held_out_refit_holds_the_coefficients_only_the_held_out_block_shows():
+    """heldout.unsupported_coefficients: with every instant seen, none; with the instants where a
+    clogging coefficient's column lives held out, that coefficient (and no tare or alignment)."""
+    import numpy as np
+
+    from femstudy.diagnosis import heldout
+
+    _, d = diagnosed("clogging_under_pulsation", 7)
+    p, f = d.problem, d.improved
+    assert heldout.unsupported_coefficients(p, f, p.usable) == ()
+    block = f.layout.blocks["chip_clogging"]
+    J = f.evaluation.jacobian
+    k = max(range(block.start, block.stop), key=lambda j: float(np.sum(J[:, :, j] ** 2)))
+    lives = np.any(J[:, :, k] != 0, axis=0)
+    held = heldout.unsupported_coefficients(p, f, p.usable & ~lives)
+    assert f.layout.names[k] in held
+    mechanism_names = {f.layout.names[j] for b in f.layout.blocks.values() for j in range(b.start, b.stop)}
+    assert set(held) <= mechanism_names
+
+
 def test_the_result_is_typed_all_the_way_down():
     """No bare dict, list or object field in the Diagnosis: dicts exist only in to_json()."""
     import dataclasses
