@@ -10,9 +10,9 @@ from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.catalogue import Variant
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.model import Spec, evaluate, layout
-from femstudy.diagnosis.prepare import LOADED_EDGE_MARGIN_S, align, aligned, smoothed as build_problem
+from femstudy.diagnosis.prepare import align, smoothed as build_problem
 from femstudy.drilling.history import DrillingConditions
-from femstudy.recordings import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, ThermalSoftening, synthesize
+from femstudy.recordings import Effects, FeedPulsation, Noise, SensorDrift, SpindleRipple, synthesize
 
 
 @pytest.mark.parametrize("rate, n", [(1000, 20000), (200, 2000)])

@@ -9,7 +9,6 @@ import math
 import numpy as np
 import pytest
 
-from femstudy import fe
 from femstudy.casefile import parse_case
 from femstudy.errors import UserError
 from femstudy.uncertainty import design
