@@ -62,6 +62,27 @@ def test_a_channel_fault_is_a_finding_corrected_not_a_fitted_scale(clogging_pair
     assert all(abs(v - 1) < 0.05 for v in scales.values()), scales
 
 
+def test_beside_a_repaired_channel_only_a_near_certain_mechanism_is_named(clogging_pair, monkeypatch):
+    """A channel fault corrected raises the naming bar to REPAIRED_CHANNEL_CONFIDENCE: the plain
+    case's clogging clears it (above), and with the bar just above its confidence it is dropped,
+    the reason naming the repair, while the finding stays reported."""
+    import importlib
+
+    module = importlib.import_module("femstudy.diagnosis.diagnose")
+    rec, sim = clogging_pair
+    rec = replace(rec, thrust_N=rec.thrust_N / 1000)
+    d = diagnose(rec, sim, 6.0)
+    (clogging,) = d.mechanisms
+    assert clogging.confidence >= module.REPAIRED_CHANNEL_CONFIDENCE
+    monkeypatch.setattr(module, "REPAIRED_CHANNEL_CONFIDENCE", clogging.confidence + 1e-6)
+    d = diagnose(rec, sim, 6.0)
+    assert named(d) == set() and "unit_scale" in kinds(d)
+    reason = d.to_json()["selection"]["not_selected"]["chip_clogging"]
+    assert "repaired channel (unit_scale)" in reason and f"{clogging.confidence:.2f}" in reason
+    # nothing repaired, the usual bar: the plain case still names it at that confidence
+    assert module.NAMING_CONFIDENCE < clogging.confidence
+
+
 @pytest.mark.parametrize("swapped", [False, True])
 def test_a_pulsing_feed_through_the_entry_does_not_decide_whether_columns_are_swapped(swapped):
     """femstudy's case clogging_under_pulsation 200003: thrust and torque of one size (31 N, 29

@@ -38,7 +38,7 @@ from threadpoolctl import threadpool_limits
 from femstudy.diagnosis import heldout, inputs, outside, prepare, sanity
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.catalogue import MECHANISMS
-from femstudy.diagnosis.confidence import NAMING_CONFIDENCE, Evidence, confidence
+from femstudy.diagnosis.confidence import NAMING_CONFIDENCE, REPAIRED_CHANNEL_CONFIDENCE, Evidence, confidence
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.model import Spec, evaluate, layout
@@ -230,15 +230,21 @@ def named_mechanisms(problem: Problem, selection, baseline: Fit, verdict: Verdic
 
 
 def confident_verdict(problem: Problem, fits: dict, selection, baseline: Fit, verdict: Verdict, bone_mu_w,
-                      workers: int | None = None) -> tuple[Verdict, list[Named]]:
+                      workers: int | None = None, repaired: tuple[str, ...] = ()) -> tuple[Verdict, list[Named]]:
     """The verdict with only the mechanisms named at :data:`~.confidence.NAMING_CONFIDENCE` or
-    above: the least confident below it is dropped and the verdict decided again without it (what
-    it explained is then characterised among the unexplained), until none is below."""
+    above (:data:`~.confidence.REPAIRED_CHANNEL_CONFIDENCE` when channel faults of the kinds
+    ``repaired`` were corrected): the least confident below it is dropped and the verdict decided
+    again without it (what it explained is then characterised among the unexplained), until none
+    is below."""
+    bar = REPAIRED_CHANNEL_CONFIDENCE if repaired else NAMING_CONFIDENCE
+    why = (f"the bar beside a repaired channel ({', '.join(repaired)}), whose repair is uncertain by as much as "
+           f"the mechanism would be read from: correct the recording and diagnose again" if repaired
+           else "more likely wrong than right")
     named = named_mechanisms(problem, selection, baseline, verdict, bone_mu_w)
-    while named and named[-1].confidence < NAMING_CONFIDENCE:
+    while named and named[-1].confidence < bar:
         weakest = named[-1]
-        reason = Dropped(weakest.mechanism, f"its confidence is {weakest.confidence:.2f}, below "
-                                            f"{NAMING_CONFIDENCE:g}: more likely wrong than right, so not named")
+        reason = Dropped(weakest.mechanism, f"its confidence is {weakest.confidence:.2f}, below {bar:g}: {why}, "
+                                            f"so not named")
         again = decide(problem, fits, verdict.subset - {weakest.mechanism}, selection.inflation, workers)
         verdict = replace(again, replaced=verdict.replaced + (reason,) + again.replaced)
         named = named_mechanisms(problem, selection, baseline, verdict, bone_mu_w)
@@ -336,6 +342,10 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
     verdict, named = confident_verdict(problem, fits, selection, baseline,
                                        decide(problem, fits, selection.subset, selection.inflation, workers),
                                        bone_mu_w, workers)
+    scale_findings = _channel_scale(problem, verdict.fit)
+    repaired = tuple(dict.fromkeys([f.kind for f in findings] + [u.kind for u in scale_findings]))
+    if repaired and named:
+        verdict, named = confident_verdict(problem, fits, selection, baseline, verdict, bone_mu_w, workers, repaired)
     improved = verdict.fit
     frame = improved.evaluation.frame
     span = (frame.contact_t_s, min(frame.stop_t_s, float(t[-1])))
@@ -352,7 +362,7 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
                    + [outside.Unexplained(e.start_s, e.end_s, e.channel, "air_event",
                                           e.describe("", 0.0), (("size", round(e.size, 4)), ("event", 0.0)))
                       for e in stretches.events]
-                   + _channel_scale(problem, improved)
+                   + scale_findings
                    + _failed_signatures(problem, selection)
                    + outside.report(problem, list(verdict.shapes), leftover, spindle, span, peaks))
     chi2_dof, p_value = residual_test(problem, improved)
