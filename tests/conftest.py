@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -56,11 +57,22 @@ def bone_library(tmp_path, monkeypatch):
 
 
 @pytest.fixture(scope="session")
-def mesh_cache(tmp_path_factory):
+def mesh_cache(tmp_path_factory, shared_cache):
     """One cache per test session and xdist worker, for tests that count factorisations, clear
     kept answers or expect a first run to compute: what another worker's tests keep cannot reach
-    them."""
-    return tmp_path_factory.mktemp("mesh-cache")
+    them. Its meshes need no such isolation (an entry never changes once stored): the built-in
+    femur at 16 mm, which most of these tests mesh, is built once in the shared cache (a worker
+    asking meanwhile waits on its build lock) and the shared cache's mesh entries are copied in,
+    instead of each worker running TetWild on it again."""
+    from femstudy.casefile import parse_case
+    from femstudy.study.femur import femur_model
+
+    folder = tmp_path_factory.mktemp("mesh-cache")
+    femur_model(parse_case('name = "warm"\n[mesh]\nsize_mm = 16.0\n'), shared_cache)
+    for entry in shared_cache.iterdir():  # complete entries only: one being written has a hidden name
+        if len(entry.name) == 64 and (entry / "meta.json").is_file():
+            shutil.copytree(entry, folder / entry.name)
+    return folder
 
 
 @pytest.fixture(scope="session")
