@@ -108,28 +108,6 @@ def test_drift_alone_rates():
     assert p["torque_Nmm_per_s"] == pytest.approx(case.true["torque_Nmm_per_s"], rel=0.1, abs=0.02)
 
 
-def test_a_drift_seen_in_air_on_one_side_of_the_cut_is_not_named():
-    """The drift case cut where the simulated load ends: its air lies before contact only, where
-    a trend cannot be told from a zero that wanders. The drift is not named, the reason says why,
-    and what it would have explained is reported as a wandering zero."""
-    import dataclasses
-
-    import numpy as np
-
-    case, whole = diagnosed("drift", 7)
-    assert "sensor_drift" in found(whole)
-    rec, sim = case.recording, case.simulation
-    end = sim.time_s[np.flatnonzero(sim.thrust_N > 0.05 * sim.thrust_N.max())[-1]] - whole.problem.shift_s
-    keep = rec.time_s <= end
-    cut = dataclasses.replace(rec, **{f.name: getattr(rec, f.name)[keep] for f in dataclasses.fields(rec)
-                                      if isinstance(getattr(rec, f.name), np.ndarray)})
-    d = diagnose(cut, TraceSimulation.from_recording(sim, rec.spindle_rpm), float(rec.metadata["cortex_mm"]))
-    js = d.to_json()
-    assert "sensor_drift" not in found(d)
-    assert "one side of the cut" in js["selection"]["not_selected"]["sensor_drift"]
-    assert "wandering_zero" in [u["kind"] for u in js["unexplained"]]
-
-
 def test_short_cortex_clogging_growth_matches_the_bone_set():
     case, d = diagnosed("short_cortex", 7)
     assert case.recording.metadata["cortex_mm"] <= 3.0
