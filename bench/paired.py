@@ -4,33 +4,27 @@
         -- python bench/peers/femstudy_run.py model.npz t.npz --analysis transient
 
 A (after ``--``) and B (``--vs``, one string split as a shell would) run in turn, A B A B …,
-after ``--warmup`` uncounted pairs; each run is one child process, its output discarded. Per
-command: wall seconds (a monotonic clock around start and reaping), CPU seconds (user + system of
-the child and the children it waited for, from ``os.wait4``) and peak resident memory [MiB]; then
-A/B of wall and CPU taken pair by pair, so that a machine whose speed drifts during the runs
-still gives a meaningful ratio. Every figure is printed as min, median and max: quote the median.
-Standard library only, so anyone can repeat a pairing quoted in bench/RESULTS.md.
+after ``--warmup`` uncounted pairs, each measured from outside by :func:`bench.peers.measure.measure`
+(wall time, CPU time, peak memory; output to a temporary log). Then A/B of wall and CPU taken
+pair by pair, so that a machine whose speed drifts during the runs still gives a meaningful
+ratio. Every figure is printed as min, median and max: quote the median. Standard library only,
+so anyone can repeat a pairing quoted in bench/RESULTS.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import shlex
 import statistics
-import subprocess
-import time
+import sys
+import tempfile
+from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-def run_once(command: list[str]) -> dict[str, float]:
-    """One whole process: wall [s], cpu [s], peak [MiB], exit status."""
-    start = time.perf_counter()
-    child = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    _, status, usage = os.wait4(child.pid, 0)
-    wall = time.perf_counter() - start
-    child.returncode = os.waitstatus_to_exitcode(status)  # reaped here: keep Popen from waiting again
-    return {"wall": wall, "cpu": usage.ru_utime + usage.ru_stime, "peak": usage.ru_maxrss / 1024,
-            "exit": child.returncode}
+from bench.peers.measure import measure  # noqa: E402
+
+FIELDS = (("wall_s", "wall s"), ("cpu_s", "cpu s"), ("tree_peak_MB", "peak MiB"))
 
 
 def spread(values: list[float]) -> str:
@@ -44,25 +38,24 @@ def main() -> None:
     parser.add_argument("--vs", required=True, help="command B, the baseline, as one string")
     parser.add_argument("command", nargs=argparse.REMAINDER, help="-- command A")
     args = parser.parse_args()
-    a = args.command[1:] if args.command[:1] == ["--"] else args.command
-    if not a:
+    commands = {"A": args.command[1:] if args.command[:1] == ["--"] else args.command, "B": shlex.split(args.vs)}
+    if not commands["A"]:
         parser.error("give command A after --")
-    b = shlex.split(args.vs)
-    runs: dict[str, list[dict]] = {"A": [], "B": []}
-    for i in range(args.warmup + args.n):
-        pair = {"A": run_once(a), "B": run_once(b)}
-        if i >= args.warmup:
-            for key, result in pair.items():
-                runs[key].append(result)
+    runs: dict[str, list] = {"A": [], "B": []}
+    with tempfile.TemporaryDirectory() as logs:
+        for i in range(args.warmup + args.n):
+            pair = {key: measure(command, Path(logs) / f"{key}.log") for key, command in commands.items()}
+            if i >= args.warmup:
+                for key, result in pair.items():
+                    runs[key].append(result)
     print(f"{'':14s} {'min':>10s} {'median':>10s} {'max':>10s}   ({args.n} pairs, whole processes)")
-    for key in ("A", "B"):
-        exits = sorted({r["exit"] for r in runs[key]})
-        print(f"{key} exit {exits}")
-        for field, label in (("wall", "wall s"), ("cpu", "cpu s"), ("peak", "peak MiB")):
-            print(f"{key} {label:12s} {spread([r[field] for r in runs[key]])}")
-    for field in ("wall", "cpu"):
-        ratios = [x[field] / y[field] for x, y in zip(runs["A"], runs["B"])]
-        print(f"A/B {field:10s} {spread(ratios)}")
+    for key, results in runs.items():
+        print(f"{key} exit {sorted({r.returncode for r in results})}")
+        for field, label in FIELDS:
+            print(f"{key} {label:12s} {spread([getattr(r, field) for r in results])}")
+    for field, label in FIELDS[:2]:
+        ratios = [getattr(x, field) / getattr(y, field) for x, y in zip(runs["A"], runs["B"])]
+        print(f"A/B {label[:-2]:10s} {spread(ratios)}")
 
 
 if __name__ == "__main__":

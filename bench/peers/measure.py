@@ -27,7 +27,8 @@ SAMPLE_S = 0.5
 @dataclass(frozen=True)
 class Measurement:
     """One run: ``wall_s`` [s], ``peak_MB`` [MiB] (largest process), ``tree_peak_MB`` [MiB]
-    (all its processes, sampled), exit status and where its output went."""
+    (all its processes, sampled), exit status, where its output went, and ``cpu_s`` [s] (user +
+    system of the child and the descendants it waited for)."""
 
     command: tuple[str, ...]
     wall_s: float
@@ -35,6 +36,7 @@ class Measurement:
     returncode: int
     log: Path
     tree_peak_MB: float = float("nan")
+    cpu_s: float = float("nan")
 
     def check(self) -> "Measurement":
         if self.returncode != 0:
@@ -67,7 +69,8 @@ def measure(command: list[str], log: str | os.PathLike, cwd: str | os.PathLike |
         sampler.join()
     proc.returncode = os.waitstatus_to_exitcode(status)
     peak = usage.ru_maxrss / 1024
-    return Measurement(tuple(command), wall, peak, proc.returncode, log, max(peak, tree_peak[0] / 2 ** 20))
+    return Measurement(tuple(command), wall, peak, proc.returncode, log, max(peak, tree_peak[0] / 2 ** 20),
+                       usage.ru_utime + usage.ru_stime)
 
 
 def _sample_tree(pid: int, done: threading.Event, peak: list) -> None:
