@@ -17,11 +17,24 @@ SHARED = REPO.parent / "shared"
 TLEM2_FEMUR = Path(os.environ.get("FEMSTUDY_TLEM2") or SHARED / "data" / "femur-tlem2" / "femur_r.stl")
 
 
+#: Order of the heavy tests, ``pytest.mark.slow(rank=...)``: the README's main study (the default
+#: case at its own settings, from the session's shared cache) first, the other heavy tests next,
+#: and last of them those that run the default case again (the README's script, the study
+#: example): by the time they start, the main study has kept its answers and they read them.
+#: xdist's ``loadgroup`` would pin them to one worker, but with pytest 9 it groups nothing.
+MAIN_STUDY, HEAVY, AFTER_MAIN_STUDY = 0, 1, 2
+
+
 def pytest_collection_modifyitems(config, items):
     """The heavy tests (marked ``slow``: cold studies, the documentation's scripts) first, in
-    their own order, then the rest: the two xdist workers start on them at once and finish on
-    short tests, instead of one worker running a three-minute study alone at the end."""
-    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+    the order of their ``rank`` (:data:`MAIN_STUDY`, :data:`HEAVY`, :data:`AFTER_MAIN_STUDY`),
+    then the rest: the two xdist workers start on them at once and finish on short tests,
+    instead of one worker running a three-minute study alone at the end."""
+    def rank(item) -> int:
+        slow = item.get_closest_marker("slow")
+        return AFTER_MAIN_STUDY + 1 if slow is None else slow.kwargs.get("rank", HEAVY)
+
+    items.sort(key=rank)
 
 
 def pytest_report_header(config):

@@ -25,7 +25,7 @@ import sys
 
 import pytest
 
-from conftest import REPO
+from conftest import AFTER_MAIN_STUDY, MAIN_STUDY, REPO
 
 DOCUMENTS = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
 LANGUAGES = {"python", "toml", "console", "bash", "json", "text"}
@@ -39,9 +39,10 @@ def blocks(language: str | None = None) -> list:
         for match in FENCE.finditer(text):
             line = text.count("\n", 0, match.start()) + 1
             if language is None or match.group(1) == language:
-                # a script is run whole (the README's runs a study and a sweep): heavy, run first
-                found.append(pytest.param(match.group(1), match.group(2), id=f"{path.name}:{line}",
-                                          marks=pytest.mark.slow if language == "python" else ()))
+                # a script is run whole (the README's runs the default case's study and a sweep):
+                # heavy, run early, but after the main study, whose answers it reads
+                marks = pytest.mark.slow(rank=AFTER_MAIN_STUDY) if language == "python" else ()
+                found.append(pytest.param(match.group(1), match.group(2), id=f"{path.name}:{line}", marks=marks))
     return found
 
 
@@ -117,14 +118,17 @@ def test_ci_runs_the_readme_test_command():
     assert ci == [next(c for c in _readme_bash() if "pytest" in c)]
 
 
-@pytest.mark.slow
-def test_readme_main_study_runs(tmp_path):
+@pytest.mark.slow(rank=MAIN_STUDY)
+def test_readme_main_study_runs(tmp_path, shared_cache):
     """The README's first command, after its install step: the main study on the built-in femur
-    at the case's own settings, from a fresh cache, as a new user runs it."""
+    at the case's own settings, as a new user runs it. It is the session's first test, and no
+    other test meshes this case at 8 mm in the shared cache, so it meshes and computes everything
+    itself; the scripts that run the case again later (conftest.AFTER_MAIN_STUDY) read its kept
+    answers."""
     command = next(c for c in _readme_bash() if "femstudy run" in c).split("&&")[-1].strip()
     words = shlex.split(command)
     assert words[0].endswith("femstudy") and words[1:] == ["run", "cases/middiaphysis.toml"]
-    env = {**os.environ, "FEMSTUDY_CACHE": str(tmp_path / "cache")}
+    env = {**os.environ, "FEMSTUDY_CACHE": str(shared_cache)}
     proc = subprocess.run([sys.executable, "-m", "femstudy", *words[1:], "--out", str(tmp_path / "out"), "--quiet"],
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=1500)
     assert proc.returncode == 0, proc.stderr

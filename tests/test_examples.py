@@ -1,11 +1,12 @@
-"""The scripts in docs/examples run, on coarse meshes, using only the public API."""
+"""The scripts in docs/examples run, using only the public API: on coarse meshes, or at the default
+case's own settings where the README's main study kept the answers (conftest.AFTER_MAIN_STUDY)."""
 
 import ast
 import importlib.util
 
 import pytest
 
-from conftest import REPO
+from conftest import AFTER_MAIN_STUDY, REPO
 
 EXAMPLES = REPO / "docs" / "examples"
 
@@ -32,9 +33,10 @@ def test_examples_import_only_the_public_api(path):
             assert node.attr in femstudy.__all__, f"{path.name}: femstudy.{node.attr} is not public"
 
 
-@pytest.mark.slow
+@pytest.mark.slow(rank=AFTER_MAIN_STUDY)
 def test_study_example(tmp_path, shared_cache, capsys):
-    result = load("study").main(tmp_path / "study", mesh_size_mm=16.0, cache_dir=shared_cache)
+    """At the case's own size: the README's main study, run before it, kept the answers."""
+    result = load("study").main(tmp_path / "study", cache_dir=shared_cache)
     assert (tmp_path / "study" / "summary.json").is_file()
     assert result.peak("max_deflection_mm").value > result.peak("max_deflection_mm", "static").value > 0
     assert "dynamic amplification" in capsys.readouterr().out
