@@ -39,8 +39,8 @@ def blocks(language: str | None = None) -> list:
         for match in FENCE.finditer(text):
             line = text.count("\n", 0, match.start()) + 1
             if language is None or match.group(1) == language:
-                # a script is run whole (the README's runs the default case's study and a sweep):
-                # heavy, run early, but after the main study, whose answers it reads
+                # a script is run whole: heavy, run early, but after the main study (the README's
+                # script runs the default case again and reads the main study's answers)
                 marks = pytest.mark.slow(rank=AFTER_MAIN_STUDY) if language == "python" else ()
                 found.append(pytest.param(match.group(1), match.group(2), id=f"{path.name}:{line}", marks=marks))
     return found
