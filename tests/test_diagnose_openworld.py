@@ -44,6 +44,19 @@ def test_a_decoy_is_unexplained_and_not_named(kind, i, shape, folder):
     assert js["residual_check"]["consistent_with_noise"] is False   # and the report does not hide it
 
 
+@pytest.mark.slow
+def test_a_harder_layer_at_the_cortexs_far_side_is_not_named_clogging(folder):
+    """Seed 10's first hard inclusion: the lips are still in the layer at breakthrough (3.94 s) and
+    leave it at 4.07 s, so its excess falls as the cone clears the cortex, as a chip column's
+    does. Without the chisel edge's own column in the layer's form, a clogging stood beside
+    the layer with 9/10 of its size and was named (0.80)."""
+    case = make_case("hard_inclusion", 1_015_000, folder)
+    js = diagnose(case.recording, case.simulation).to_json()
+    assert case.decoy["end_s"] > case.events["breakthrough_s"]
+    assert not {m["mechanism"] for m in js["missing_physics"]} & FOUR, js["selection"]
+    assert any(u["kind"] == "bump" for u in overlapping(js["unexplained"], case.decoy)), js["unexplained"]
+
+
 def test_a_feed_off_by_twelve_percent_is_not_read_as_two_inverted_channels(folder):
     """feed_or_clock case 1: the recording correlates poorly with the trace at every lag (0.22 at
     its own clock). A mirror placement 15 s later with both channels turned over has the clearer

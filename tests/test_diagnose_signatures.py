@@ -380,6 +380,27 @@ def test_monotone_bases_hold_every_rising_form_and_no_fall():
     assert np.max(np.abs(B @ coef - bump)) > 0.3
 
 
+def test_a_layer_follows_the_drills_point_through_it():
+    """A 0.5 mm layer, a 1.5 mm cone, 1 mm/s: the chisel edge is inside for 0.5 s from entry; the
+    lips' share rises to d/cone = 1/3 while the tip crosses, stays until the outer corner arrives
+    and is gone 2 s after entry; the torque's share, weighted by radius, trails the thrust's. A
+    layer whose far face is the cortex's is not a candidate: that is the exit itself."""
+    from femstudy.diagnosis.shapes import SHAPES, Context
+
+    layer = SHAPES["layer"]
+    t = np.arange(0.0, 8.0, 0.01)
+    ctx = Context(t, (1.0, 7.5), 0.05, 0.1, 1.0, 1.5, 5.0, ("thrust_N", "torque_Nmm"))
+    entry = {"start_s": 2.0, "width_s": 2.0, "thickness_mm": 0.5}
+    lips_F, chisel = layer.columns(ctx, 0, np.ones_like(t), entry)
+    lips_T, _ = layer.columns(ctx, 1, np.ones_like(t), entry)
+    assert np.all(chisel[(t > 2.01) & (t < 2.49)] == 1) and not np.any(chisel[(t < 1.99) | (t > 2.51)])
+    assert lips_F.max() == pytest.approx(1 / 3, abs=0.03) and not np.any(lips_F[t > 4.01])
+    assert np.sum(t * lips_T) / lips_T.sum() > np.sum(t * lips_F) / lips_F.sum() + 0.2
+    # the tip leaves the cortex at 1 + 5/1 = 6 s: it must have left the layer by then, a scan step early
+    assert all(c["start_s"] + c["thickness_mm"] / 1.0 <= 6.0 - 0.05 for c in layer.candidates(ctx))
+    assert max(c["start_s"] + c["thickness_mm"] for c in layer.candidates(ctx)) > 5.5
+
+
 def test_the_catalogue_and_the_shapes_are_registries():
     """Each of the four is one module of femstudy.diagnosis.catalogue, each shape one of
     femstudy.diagnosis.shapes, registered where defined."""
@@ -392,7 +413,7 @@ def test_the_catalogue_and_the_shapes_are_registries():
     for name, mechanism in MECHANISMS.items():
         assert importlib.import_module(f"femstudy.diagnosis.catalogue.{name}") and mechanism.name == name
         assert isinstance(mechanism.role, Role) and mechanism.floor > 0
-    assert {"step", "bump", "oscillation", "timing", "load_power"} <= set(SHAPES)
+    assert {"step", "bump", "layer", "oscillation", "timing", "load_power"} <= set(SHAPES)
 
 
 def test_a_new_mechanism_is_one_registered_object(clogging_pair):
