@@ -398,7 +398,7 @@ def test_a_layer_follows_the_drills_point_through_it():
     assert np.sum(t * lips_T) / lips_T.sum() > np.sum(t * lips_F) / lips_F.sum() + 0.2
     # the tip leaves the cortex at 1 + 5/1 = 6 s: it must have left the layer by then, a scan step early
     assert all(c["start_s"] + c["thickness_mm"] / 1.0 <= 6.0 - 0.05 for c in layer.candidates(ctx))
-    assert max(c["start_s"] + c["thickness_mm"] for c in layer.candidates(ctx)) > 5.5
+    assert max(c["start_s"] + c["thickness_mm"] / 1.0 for c in layer.candidates(ctx)) > 5.5
 
 
 def test_the_catalogue_and_the_shapes_are_registries():
