@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from femstudy.diagnosis.shapes.registry import WORD, amounts, register
+from femstudy.diagnosis.shapes.registry import local_change, register
 
 WIDTHS_S = (0.5, 1.0, 2.0, 3.0)
 
@@ -43,10 +43,7 @@ class Bump:
 
     def describe(self, names, coefficients, parameters, one_channel):
         a, b = parameters["start_s"], parameters["start_s"] + parameters["width_s"]
-        only = f", {WORD[names[0]]} only" if one_channel else ""
-        kind = f"{WORD[names[0]]}_only" if one_channel else "bump"
-        return kind, (f"a local change between {a:.2f} and {b:.2f} s: {amounts(names, coefficients)} there{only}, "
-                      f"as from a harder or softer layer of bone.")
+        return local_change(names, coefficients, one_channel, f"a local change between {a:.2f} and {b:.2f} s", "there")
 
 
 register(Bump())

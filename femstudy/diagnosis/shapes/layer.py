@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from femstudy.diagnosis.shapes.registry import WORD, amounts, register
+from femstudy.diagnosis.shapes.registry import local_change, register
 
 THICKNESS_MM = (0.25, 0.5, 1.0, 2.0)
 LIP_POINTS = 24
@@ -75,10 +75,9 @@ class Layer:
     def describe(self, names, coefficients, parameters, one_channel):
         a, b = parameters["start_s"], parameters["start_s"] + parameters["width_s"]
         strength = {n: [float(coefficients[n][0] + coefficients[n][1])] for n in names}
-        only = f", {WORD[names[0]]} only" if one_channel else ""
-        kind = f"{WORD[names[0]]}_only" if one_channel else "bump"
-        return kind, (f"a layer {parameters['thickness_mm']:.2f} mm thick, met by the point from {a:.2f} to {b:.2f} s: "
-                      f"{amounts(names, strength)} inside it{only}, as from a harder or softer layer of bone.")
+        return local_change(names, strength, one_channel,
+                            f"a layer {parameters['thickness_mm']:.2f} mm thick, met by the point from {a:.2f} to {b:.2f} s",
+                            "inside it")
 
 
 register(Layer())

@@ -83,3 +83,12 @@ def amounts(names: list[str], coefficients: dict) -> str:
     return " and ".join(f"the {WORD[n]} by {100 * float(coefficients[n][0]):+.1f} %" for n in names)
 
 
+def local_change(names: list[str], coefficients: dict, one_channel: bool, what: str, where: str) -> tuple[str, str]:
+    """(kind, description) of a change for a while, as from a harder or softer layer: ``bump`` on
+    both channels, ``thrust_only``/``torque_only`` on one; ``what`` says when, ``where`` where
+    the amounts apply ('there', 'inside it')."""
+    only = f", {WORD[names[0]]} only" if one_channel else ""
+    kind = f"{WORD[names[0]]}_only" if one_channel else "bump"
+    return kind, f"{what}: {amounts(names, coefficients)} {where}{only}, as from a harder or softer layer of bone."
+
+
