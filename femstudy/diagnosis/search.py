@@ -167,6 +167,15 @@ def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict
     return fits
 
 
+def refit_all(problem: Problem, fits: dict[frozenset, Fit], workers: int | None = None) -> dict[frozenset, Fit]:
+    """Each subset's fit of an earlier search (``fits``) fitted again on ``problem``, in the same
+    variants and from its optimum: the search of a problem a few percent from the one it ran on
+    (the calibration scales of :mod:`.diagnose`), at one fit per subset."""
+    subsets = list(fits)
+    with FitPool(problem, workers) as pool:
+        return dict(zip(subsets, pool.fit_many([(fits[s].spec, fits[s].params()) for s in subsets])))
+
+
 def _better(problem: Problem, f: Fit, than: Fit) -> bool:
     """Whether ``f`` is a better fit of its subset than ``than``: a lower BIC, and before that
     the form it was offered as (a slower wave whose fundamental is not its largest line is not
