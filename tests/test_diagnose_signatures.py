@@ -383,8 +383,8 @@ def test_monotone_bases_hold_every_rising_form_and_no_fall():
 def test_a_layer_follows_the_drills_point_through_it():
     """A 0.5 mm layer, a 1.5 mm cone, 1 mm/s: the chisel edge is inside for 0.5 s from entry; the
     lips' share rises to d/cone = 1/3 while the tip crosses, stays until the outer corner arrives
-    and is gone 2 s after entry; the torque's share, weighted by radius, trails the thrust's. A
-    layer whose far face is the cortex's is not a candidate: that is the exit itself."""
+    and is gone 2 s after entry; the torque's share, weighted by radius, trails the thrust's. The
+    tip leaves every candidate layer before it leaves the cortex, the last ones just before."""
     from femstudy.diagnosis.shapes import SHAPES, Context
 
     layer = SHAPES["layer"]
@@ -396,9 +396,9 @@ def test_a_layer_follows_the_drills_point_through_it():
     assert np.all(chisel[(t > 2.01) & (t < 2.49)] == 1) and not np.any(chisel[(t < 1.99) | (t > 2.51)])
     assert lips_F.max() == pytest.approx(1 / 3, abs=0.03) and not np.any(lips_F[t > 4.01])
     assert np.sum(t * lips_T) / lips_T.sum() > np.sum(t * lips_F) / lips_F.sum() + 0.2
-    # the tip leaves the cortex at 1 + 5/1 = 6 s: it must have left the layer by then, a scan step early
-    assert all(c["start_s"] + c["thickness_mm"] / 1.0 <= 6.0 - 0.05 for c in layer.candidates(ctx))
-    assert max(c["start_s"] + c["thickness_mm"] / 1.0 for c in layer.candidates(ctx)) > 5.5
+    # the tip leaves the cortex at 1 + 5/1 = 6 s: it must have left the layer by then, within a scan step
+    leaves = [c["start_s"] + c["thickness_mm"] / 1.0 for c in layer.candidates(ctx)]
+    assert max(leaves) < 6.0 and max(leaves) > 6.0 - 0.25
 
 
 def test_the_catalogue_and_the_shapes_are_registries():

@@ -12,10 +12,11 @@ columns per channel, each on the modelled load L_c(t):
   so this column has its own amplitude.
 
 The sum of a channel's two amplitudes is the layer's change of strength. Layers of 0.25–2 mm
-(refined ×0.8–1.25 around the best) whose far face the tip leaves at least one scan step before
-it leaves the cortex (or the cut ends): a layer that ends at the cortex's far face is the exit
-itself. Reported as a ``bump`` (the contract's kind for a local change); on one channel only,
-as ``thrust_only``/``torque_only``.
+(refined ×0.8–1.25 around the best) whose far face the tip leaves before it leaves the cortex
+(or the cut ends), however shortly before: a layer a tenth of a millimetre above the cortex's
+far face is a layer, and left out it was named as clogging (docs/diagnosis.md §11). Reported
+as a ``bump`` (the contract's kind for a local change); on one channel only, as
+``thrust_only``/``torque_only``.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ class Layer:
         """Time [s] from the tip's entry to the lips' exit, and the latest entry [s]."""
         w = float((d + ctx.cone_mm) / ctx.feed_mm_s)
         tip_leaves_cortex = min(ctx.cut[1], ctx.cut[0] + ctx.cortex_mm / ctx.feed_mm_s)
-        return w, tip_leaves_cortex - d / ctx.feed_mm_s - max(ctx.step_s, w / 8)
+        return w, tip_leaves_cortex - d / ctx.feed_mm_s
 
     def _entries(self, ctx, d: float, starts) -> list[dict]:
         w, latest = self._span(ctx, d)
