@@ -225,10 +225,10 @@ def test_model_derivatives_match_finite_differences_in_every_coefficient():
     assert checked == len(lay.names) - len(clock)
 
 
-def test_a_rescaling_that_cannot_reach_noise_is_not_searched_and_changes_nothing(monkeypatch):
+def test_a_rescaling_that_cannot_reach_noise_is_not_refitted_and_changes_nothing(monkeypatch):
     """A 5 % low simulation and a thrust step of +30 % halfway through the cut (outside the
     catalogue): even the fullest fit with the scales stays far above noise, so the rescaled family
-    is not searched; searching it anyway (no reach limit) gives the same diagnosis."""
+    is not refitted; refitting it anyway (no reach limit) gives the same diagnosis."""
     import importlib
     from dataclasses import replace
 

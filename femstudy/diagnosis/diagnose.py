@@ -16,7 +16,7 @@ cutting load (a simulation whose cutting energy is off by a few percent is other
 by softening or clogging), in the variants the search chose and from its optimum
 (:func:`.search.refit_all`). The rescaled family is kept when its selected model has a BIC lower by
 MIN_DELTA_BIC on the data's own noise level and leaves no more than noise: a scale that does not
-explain the recording is not let take the place of a fast softening. The family is not searched
+explain the recording is not let take the place of a fast softening. The family is not refitted
 when even the fullest fit, given the scales, stays far above noise
 (:func:`rescaling_may_reach_noise`). Two channels that need scales differing by more than
 ``CHANNEL_SCALE`` are a finding about the channels (a cross-talk or a calibration), reported, not
@@ -99,9 +99,9 @@ def rescaling_may_reach_noise(scaled: Problem, fits: dict) -> bool:
     """Whether the rescaled family could leave no more than noise, which keeping it requires.
 
     The probe: the fullest subset's fit refitted with the scales, from its optimum (one fit
-    against a search of every subset). Its χ² (on the data's own noise level) over the
+    against one per subset). Its χ² (on the data's own noise level) over the
     χ² test's bound χ²₀ at p = RESIDUAL_P on n degrees of freedom (the largest bound any
-    selected model's test, on n − k, can have) decides: the family is searched only when
+    selected model's test, on n − k, can have) decides: the family is refitted only when
     χ² ≤ RESCALED_REACH · χ²₀. The factor was set when the whole search ran again with the
     scales (other variants, a pulsation found in the rescaled residual): on the tuning split
     (seed 1, 38 searches) its selected model came to no less than 0.30 of the probe's χ², so a
