@@ -95,12 +95,12 @@ def scale_helps(problem: Problem, f: Fit, inflation: np.ndarray) -> bool:
     return big and gain - len(problem.channels) * math.log(problem.n) >= MIN_DELTA_BIC
 
 
-def rescaling_may_reach_noise(scaled: Problem, fits: dict) -> bool:
+def rescaling_may_reach_noise(scaled: Problem, probe: Fit) -> bool:
     """Whether the rescaled family could leave no more than noise, which keeping it requires.
 
-    The probe: the fullest subset's fit refitted with the scales, from its optimum (one fit
-    against one per subset). Its χ² (on the data's own noise level) over the
-    χ² test's bound χ²₀ at p = RESIDUAL_P on n degrees of freedom (the largest bound any
+    The probe: the fullest subset's fit refitted with the scales, from its optimum (the first of
+    the family's refits, one fit against one per subset). Its χ² (on the data's own noise level)
+    over the χ² test's bound χ²₀ at p = RESIDUAL_P on n degrees of freedom (the largest bound any
     selected model's test, on n − k, can have) decides: the family is refitted only when
     χ² ≤ RESCALED_REACH · χ²₀. The factor was set when the whole search ran again with the
     scales (other variants, a pulsation found in the rescaled residual): on the tuning split
@@ -110,8 +110,6 @@ def rescaling_may_reach_noise(scaled: Problem, fits: dict) -> bool:
     was kept. The refits now run instead (:func:`.search.refit_all`) are among the models that
     search tried, so the factor is kept as it was set.
     """
-    full = fits[max(fits, key=len)]
-    probe = fit(scaled, full.spec, full.params())
     bound = float(stats.chi2.isf(RESIDUAL_P, scaled.n * scaled.n_eff_factor))
     return probe.chi2_total * scaled.n_eff_factor <= RESCALED_REACH * bound
 
@@ -328,10 +326,12 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
     if selection.residual_p_value <= RESIDUAL_P and any(scale_helps(problem, f, selection.inflation)
                                                         for f in (fits[selection.subset], baseline)):
         scaled = replace(problem, calibrate=True)
-        if not rescaling_may_reach_noise(scaled, fits):
+        fullest = max(fits, key=len)
+        probe = fit(scaled, fits[fullest].spec, fits[fullest].params())   # as refit_all fits it
+        if not rescaling_may_reach_noise(scaled, probe):
             say("the simulated loads rescaled would still leave more than noise: not refitted")
         else:
-            scaled_fits = refit_all(scaled, fits, workers)
+            scaled_fits = refit_all(scaled, fits, workers, refitted={fullest: probe})
             scaled_selection = select(scaled, scaled_fits)
             if (bic(scaled, scaled_fits[scaled_selection.subset]) < bic(problem, fits[selection.subset]) - MIN_DELTA_BIC
                     and scaled_selection.residual_p_value > RESIDUAL_P):

@@ -167,13 +167,17 @@ def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict
     return fits
 
 
-def refit_all(problem: Problem, fits: dict[frozenset, Fit], workers: int | None = None) -> dict[frozenset, Fit]:
+def refit_all(problem: Problem, fits: dict[frozenset, Fit], workers: int | None = None,
+              refitted: dict[frozenset, Fit] | None = None) -> dict[frozenset, Fit]:
     """Each subset's fit of an earlier search (``fits``) fitted again on ``problem``, in the same
     variants and from its optimum: the search of a problem a few percent from the one it ran on
-    (the calibration scales of :mod:`.diagnose`), at one fit per subset."""
-    subsets = list(fits)
+    (the calibration scales of :mod:`.diagnose`), at one fit per subset; those in ``refitted``
+    (this function's own answers for some of the subsets) are kept, not fitted again."""
+    done = dict(refitted or {})
+    todo = [s for s in fits if s not in done]
     with FitPool(problem, workers) as pool:
-        return dict(zip(subsets, pool.fit_many([(fits[s].spec, fits[s].params()) for s in subsets])))
+        done.update(zip(todo, pool.fit_many([(fits[s].spec, fits[s].params()) for s in todo])))
+    return {s: done[s] for s in fits}
 
 
 def _better(problem: Problem, f: Fit, than: Fit) -> bool:
