@@ -147,6 +147,26 @@ def test_a_jump_of_the_zero_in_air_is_not_a_drift(clogging_pair):
     assert named(d) == {"chip_clogging"}
 
 
+@pytest.mark.parametrize("comes_back", [False, True])
+def test_a_zero_that_comes_back_is_wander_not_a_drift(clogging_pair, comes_back):
+    """The zero moves smoothly by a tenth of each channel's range over the record: one way (half a
+    cosine, a warm-up) it is a sensor drift; rising and coming back (half a sine), in air before
+    contact and after the cut alike, it is reported as a zero that wanders (the fitted zero turns
+    back by its whole excursion), not named."""
+    rec, sim = clogging_pair
+    s = (rec.time_s - rec.time_s[0]) / np.ptp(rec.time_s)
+    zero = np.sin(np.pi * s) if comes_back else 0.5 * (1 - np.cos(np.pi * s))
+    d = diagnose(replace(rec, thrust_N=rec.thrust_N + 0.1 * np.ptp(rec.thrust_N) * zero,
+                         torque_Nmm=rec.torque_Nmm + 0.1 * np.ptp(rec.torque_Nmm) * zero), sim, 6.0)
+    assert "chip_clogging" in named(d)
+    if comes_back:
+        wander = [u for u in d.unexplained if u.kind == "wandering_zero"]
+        assert "sensor_drift" not in named(d) and len(wander) == 1
+        assert dict(wander[0].evidence)["one_way"] > 0.9
+    else:
+        assert "sensor_drift" in named(d) and "wandering_zero" not in kinds(d)
+
+
 @pytest.fixture(scope="module")
 def feed_pair():
     """A recording at 2.5 mm/s and 1200 rpm, and the noise-free Allotta load history of the same

@@ -202,10 +202,15 @@ def _failed_signatures(problem: Problem, selection) -> list[outside.Unexplained]
     """What a significant mechanism dropped for a failed signature test shows instead, when the
     test names it (:attr:`.catalogue.Check.finding`): over the compared window, both channels."""
     t = problem.band.t_dec
-    return [outside.Unexplained(float(t[0]), float(t[-1]), "both", c.finding,
-                                f"{d.mechanism.replace('_', ' ')} is significant but not its signature: {c.text}.",
-                                ((c.name, round(float(c.value), 4)),))
-            for d in selection.dropped for c in d.failed if c.finding]
+    out = []
+    for d in selection.dropped:
+        for finding in dict.fromkeys(c.finding for c in d.failed if c.finding):  # one entry per finding
+            checks = [c for c in d.failed if c.finding == finding]
+            out.append(outside.Unexplained(
+                float(t[0]), float(t[-1]), "both", finding,
+                f"{d.mechanism.replace('_', ' ')} is significant but not its signature: "
+                f"{'; '.join(c.text for c in checks)}.", tuple((c.name, round(float(c.value), 4)) for c in checks)))
+    return out
 
 
 def named_mechanisms(problem: Problem, selection, baseline: Fit, verdict: Verdict, bone_mu_w) -> list[Named]:
