@@ -464,9 +464,11 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
             shapes = basis.basis @ shapes_r if static_shapes is None else static_shapes
             return basis.result(y, vy, ay, residual, indicator, shapes)
 
-        if search.offer(indicator, result) or estimate is not None:
-            if estimate is not None:
-                timings["indicator_estimated"] = True
+        done = search.offer(indicator, result)
+        if estimate is not None:
+            timings["indicator_estimated"] = True
+            break
+        if done:
             break
         # the next block: the error's principal directions that matter for the target
         U, sigma, _ = np.linalg.svd(D, full_matrices=False)
@@ -477,14 +479,15 @@ def preconditioned_march(fs: FactorizedSystem, P, A, dt, damping, state, static_
         # and is not substituted (as a refined static solve's last correction is not)
         left_out = float(sigma[taken]) if taken < sigma.size else 0.0
         promised = max(search.contraction() * indicator, left_out)
-        if promised <= rtol and quasi_static(basis, dt):
+        if promised <= rtol and _quasi_static(basis, dt):
             estimate = promised
     return search.finish()
 
 
-def quasi_static(basis: _Basis, dt: float) -> bool:
-    """Δt is at least :data:`QUASI_STATIC_PERIODS` periods of the basis's lowest mode (a Ritz
-    frequency, above the model's lowest one by the basis's error)."""
+def _quasi_static(basis: _Basis, dt: float) -> bool:
+    """Δt is at least :data:`QUASI_STATIC_PERIODS` periods of the basis's lowest mode. That Ritz
+    frequency lies above the model's lowest one by the basis's error (a few per cent once the
+    static shapes are in it), far inside the factor kept from where the estimate failed."""
     lowest = scipy.linalg.eigh(symmetric(basis.Kr), symmetric(basis.Mr), eigvals_only=True, subset_by_index=(0, 0))[0]
     return lowest > 0 and dt * np.sqrt(lowest) / (2 * np.pi) >= QUASI_STATIC_PERIODS
 
