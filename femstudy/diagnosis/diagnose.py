@@ -40,13 +40,13 @@ from femstudy.diagnosis import heldout, inputs, outside, prepare, sanity
 from femstudy.diagnosis.baseline import ModelSimulation, TraceSimulation
 from femstudy.diagnosis.catalogue import MECHANISMS
 from femstudy.diagnosis.confidence import NAMING_CONFIDENCE, REPAIRED_CHANNEL_CONFIDENCE, Evidence, confidence
-from femstudy.diagnosis.fit import Fit, fit
+from femstudy.diagnosis.fit import Fit
 from femstudy.diagnosis.locate import mismatch_intervals
 from femstudy.diagnosis.model import Spec, evaluate, layout
 from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.result import (ChannelFit, ChannelNoise, Diagnosis, Mismatch, Named, ResidualCheck, Scores,
                                        Timing)
-from femstudy.diagnosis.search import bic, fit_all, refit_all
+from femstudy.diagnosis.search import bic, fit_all, refit, refit_all
 from femstudy.diagnosis.select import MIN_DELTA_BIC, RESIDUAL_P, Dropped, residual_test, select
 from femstudy.diagnosis.verdict import Verdict, decide
 from femstudy.drilling.friction import BoneSet, load_bone_set
@@ -332,7 +332,7 @@ def _diagnose(recording, simulation, cortex_mm, bone, progress, model, columns, 
                                                         for f in (fits[selection.subset], baseline)):
         scaled = replace(problem, calibrate=True)
         fullest = max(fits, key=len)
-        probe = fit(scaled, fits[fullest].spec, fits[fullest].params())   # as refit_all fits it
+        probe = refit(scaled, fits[fullest])
         if not rescaling_may_reach_noise(scaled, probe):
             say("the simulated loads rescaled would still leave more than noise: not refitted")
         else:

@@ -167,6 +167,12 @@ def fit_all(problem: Problem, baseline: Fit, workers: int | None = None) -> dict
     return fits
 
 
+def refit(problem: Problem, f: Fit) -> Fit:
+    """``f``'s model fitted again on ``problem``, in the same variants and from ``f``'s optimum
+    (what :func:`refit_all` does for each subset)."""
+    return fit(problem, f.spec, f.params())
+
+
 def refit_all(problem: Problem, fits: dict[frozenset, Fit], workers: int | None = None,
               refitted: dict[frozenset, Fit] | None = None) -> dict[frozenset, Fit]:
     """Each subset's fit of an earlier search (``fits``) fitted again on ``problem``, in the same
