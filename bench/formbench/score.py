@@ -32,7 +32,7 @@ FITTING_KINDS = {
     "chip_break": {"step"}, "hard_layer": {"bump"}, "soft_layer": {"bump"}, "spindle_slowdown": {"spindle", "load_power"},
     "feed_error": {"timing"}, "clock_error": {"timing"}, "thrust_wobble": {"oscillation"},
     "torque_friction": {"torque_only"}, "second_cortex": {"bump", "step", "second_cut"},
-    "fixture_vibration": {"oscillation"}, "air_knock": {"air_event"}, "tare_jump": {"air_event"},
+    "fixture_vibration": {"oscillation"}, "air_knock": {"air_event"}, "tare_jump": {"air_event", "zero_jump"},
     "second_touch": {"air_event"}, "polarity": {"polarity"}, "swapped": {"swapped_channels"},
     "cross_talk": {"cross_talk", "channel_scale"}, "unit_scale": {"unit_scale"}, "saturation": {"clipping"},
 }

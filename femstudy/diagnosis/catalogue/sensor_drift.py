@@ -20,10 +20,18 @@ tens of seconds an instrument drifts one way (a warm-up, a creep); a zero that w
 walk of the amplifier) is also seen in air, but a smooth trend either leaves most of its wander
 there or, following it, turns back: that is noise the noise model could not resolve from a few
 seconds of air, not a drift. Curve fits of one-way drifts turn back a little (a cubic through a
-sigmoid or a warm-up: up to 0.2 of the excursion).
+sigmoid or a warm-up: up to 0.2 of the excursion). ``not_a_jump`` — the load-free instants
+prefer a smooth zero to one that jumps where none of them sees it: the residual with the drift
+put back, fitted there by a level and a Legendre series of any degree d ≤ 3, against a level on
+each side of the cut (a re-zeroing or a moved cable during the cut, or just before contact
+inside the margin of :mod:`.air`, leaves two flat levels that a drift joins through the cut);
+it fails when the two levels are better by at least :data:`JUMP_MARGIN` (χ², the series' extra
+coefficients counted at ln n_air each).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -40,6 +48,11 @@ AIR_GAIN = 10.0
 AIR_SHARE = 0.7
 #: Largest turn back of a channel's fitted zero, as a fraction of the largest channel's excursion.
 TURN_BACK = 0.5
+#: χ² (beyond parameters) by which two levels, one each side of the cut, must fit the load-free
+#: instants better than the best smooth drift for the drift to fail ``not_a_jump``: strong evidence
+#: on the BIC scale, not a preference (two levels and a line have as many coefficients, and a
+#: linear drift seen through short stretches fits both about equally: docs/diagnosis.md §6).
+JUMP_MARGIN = 6.0
 #: Least load-free time [s] on which a drift can be seen.
 MIN_AIR_S = 0.8
 
@@ -125,7 +138,7 @@ class SensorDrift:
                       f"a smooth drift removes {100 * share:.0f} % of what the load-free instants show beyond the noise "
                       f"model (at least {100 * AIR_SHARE:g} %: the rest is a zero that wanders, not a drift)",
                       "wandering_zero"),
-                self._one_way(problem, fit)]
+                self._one_way(problem, fit), self._not_a_jump(problem, fit)]
 
     def _one_way(self, problem, fit) -> Check:
         """``one_way``: how far the fitted zero turns back against its own change, on the channel
@@ -140,6 +153,38 @@ class SensorDrift:
                      f"the fitted zero turns back by {100 * turn:.0f} % of its excursion (at most {100 * TURN_BACK:g} %: "
                      f"an instrument drifts one way over a recording; a zero that comes back wanders)",
                      "wandering_zero")
+
+    def _not_a_jump(self, problem, fit) -> Check:
+        """``not_a_jump``: how much better (χ² beyond parameters) the best smooth zero of degree
+        1–3 fits the load-free instants than a level on each side of the cut, both fitted there
+        to the residual with the drift put back (one more level each)."""
+        rows = problem.air & problem.usable
+        t = problem.band.t_dec
+        lo, hi = window(problem)
+        drift = self.curves(problem, fit, t)
+        level = np.ones((t.size, 1))
+        two_levels = np.hstack([level, (t > problem.contact_t).astype(float)[:, None]])
+        penalty = math.log(max(np.count_nonzero(rows), 3))
+        residuals = [problem.whiten(c, problem.y[c] - fit.model[c] + drift[c], rows) for c in range(len(problem.channels))]
+
+        def misfit(columns: np.ndarray) -> float:
+            total = 0.0
+            for c, r in enumerate(residuals):
+                A = problem.whiten(c, columns, rows)
+                coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+                total += float(np.sum((r - A @ coef) ** 2))
+            return total
+
+        jump = misfit(two_levels)
+        gain = max(jump - misfit(np.hstack([level, legendre_basis(t, lo, hi, d)])) - len(residuals) * (d - 1) * penalty
+                   for d in DEGREES)
+        better = (f"two levels, one each side of the cut, fit the load-free instants better than the best smooth "
+                  f"drift by {-gain:.1f}" if gain < 0 else
+                  f"the best smooth drift fits the load-free instants better than two levels, one each side of the "
+                  f"cut, by {gain:.1f}")
+        return Check("not_a_jump", gain > -JUMP_MARGIN, gain,
+                     f"{better} (χ² beyond parameters; two levels better by {JUMP_MARGIN:g} or more: the zero jumped "
+                     f"where no load-free instant sees it, a re-zeroing or a moved cable, not a drift)", "zero_jump")
 
     def reading(self, problem, fit, context) -> Reading:
         lo, hi = window(problem)
