@@ -44,7 +44,7 @@ def test_each_concealed_class_is_diagnosed_exactly(kind):
     assert d.residual_check.consistent_with_noise, d.residual_check
     if case.truth:
         assert_fit_gains(d)
-        # calibrated confidence (femstudy.diagnosis.confidence, fitted on formbench tuning seeds 1, 4, 5)
+        # calibrated confidence (femstudy.diagnosis.confidence, fitted on formbench tuning seeds 1, 4, 5, 10, 11)
         assert all(m.confidence > 0.75 for m in d.mechanisms)
     else:
         assert d.mechanisms == () and d.mismatch == () and d.unexplained == ()
@@ -149,6 +149,7 @@ def test_json_contract_names_and_types():
 
 def test_a_mechanism_below_the_naming_confidence_is_dropped_and_the_verdict_decided_again(monkeypatch):
     import importlib
+    from dataclasses import replace
 
     module = importlib.import_module("femstudy.diagnosis.diagnose")
     _, d = diagnosed("clogging_under_pulsation", 7)
@@ -164,6 +165,16 @@ def test_a_mechanism_below_the_naming_confidence_is_dropped_and_the_verdict_deci
     dropped = [r for r in verdict.replaced if "more likely wrong than right" in r.reason]
     assert dropped[0].mechanism == weakest.mechanism and f"{weakest.confidence:.2f}" in dropped[0].reason
     assert len(dropped) == len(d.mechanisms) - len(named)
+    # the evidence a drop rested on is kept (the JSON's selection.dropped_by_confidence), so that the
+    # confidence model can be calibrated on every mechanism judged, not only on those named
+    from femstudy.diagnosis.confidence import Evidence, confidence
+
+    assert dropped[0].evidence == weakest.evidence
+    assert confidence(Evidence.from_json(weakest.evidence.to_json())) == pytest.approx(
+        weakest.confidence, abs=1e-3)
+    judged = replace(d, verdict=verdict, mechanisms=named).to_json()["selection"]["dropped_by_confidence"]
+    assert judged[weakest.mechanism]["confidence"] == pytest.approx(weakest.confidence, abs=1e-4)
+    assert judged[weakest.mechanism]["evidence"] == weakest.evidence.to_json()
 
 
 def test_a_held_out_refit_holds_the_coefficients_only_the_held_out_block_shows():

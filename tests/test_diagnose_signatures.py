@@ -278,6 +278,8 @@ def test_a_chirp_is_not_taken_for_a_slower_wave(tmp_path):
     assert named(d) == {"chip_clogging", "feed_pulsation"}
     (softening,) = [r for r in d.verdict.replaced if r.mechanism == "thermal_softening"]
     assert "more likely wrong than right" in softening.reason
+    judged = d.to_json()["selection"]["dropped_by_confidence"]["thermal_softening"]
+    assert judged["confidence"] < 0.5 and judged["evidence"]["delta_bic"] >= 10
     offered = [f for f in d.fits if "feed_pulsation" in f.subset
                and f.spec.variant("feed_pulsation").get("fundamental_of")]
     assert all(slower_wave_holds(f) for f in offered)

@@ -2,8 +2,11 @@
 
     PYTHONPATH=. python -m bench.formbench.calibrate results/fb-tuning-1.json [more.json ...]
 
-Every mechanism a run named is one example: its evidence (the JSON's ``evidence``, the figures
-:class:`femstudy.diagnosis.confidence.Evidence` holds) and whether the truth has it. The
+Every mechanism a run judged is one example: its evidence (the figures
+:class:`femstudy.diagnosis.confidence.Evidence` holds: the JSON's ``evidence`` of a named one,
+``selection.dropped_by_confidence`` of one the naming bar dropped) and whether the truth has it.
+The dropped count too: the model is applied to every mechanism the verdict proposes, and fitted
+on the named alone it would never see the cases that fall below the bar. The
 coefficients of :data:`femstudy.diagnosis.confidence.COEFFICIENTS` are the penalised (ridge,
 :data:`RIDGE` on all but the intercept) maximum-likelihood logistic fit; the script prints them,
 the in-sample reliability table and refuses files of the held-out split, whose forms must stay
@@ -28,18 +31,16 @@ FOUR = ("chip_clogging", "feed_pulsation", "sensor_drift", "thermal_softening")
 
 
 def examples(paths: list[Path]) -> tuple[np.ndarray, np.ndarray]:
-    """Features and outcomes (1: the mechanism is in the truth) of every named mechanism."""
+    """Features and outcomes (1: the mechanism is in the truth) of every judged mechanism."""
     X, y = [], []
     for path in paths:
         for o in json.loads(path.read_text()):
             if o["case"]["split"] != "tuning":
                 sys.exit(f"{path}: {o['case']['name']} is of the {o['case']['split']} split; calibrate on tuning runs only")
-            for m, e in (o.get("evidence") or {}).items():
-                if m not in FOUR or not e:
-                    continue
-                ev = Evidence(e["delta_bic"], e["size_over_floor"], e["explained_share"], e["residual_consistent"],
-                              e["replacement_margin"])
-                X.append(ev.features())
+            judged = [(m, e) for m, e in (o.get("evidence") or {}).items() if m in FOUR and e]
+            judged += [(m, d["evidence"]) for m, d in (o.get("dropped") or {}).items()]
+            for m, e in judged:
+                X.append(Evidence.from_json(e).features())
                 y.append(1.0 if m in o["case"]["truth"] else 0.0)
     return np.array(X), np.array(y)
 
@@ -64,13 +65,13 @@ def main() -> int:
     args = parser.parse_args()
     X, y = examples(args.runs)
     w = fit(X, y)
-    print(f"{len(y)} named mechanisms, {int(y.sum())} right")
+    print(f"{len(y)} judged mechanisms, {int(y.sum())} right")
     print("COEFFICIENTS = (" + ", ".join(f"{v:.3g}" for v in w) + ")")
     p = 1.0 / (1.0 + np.exp(-(X @ w)))
     for lo, hi in ((0.0, 0.5), (0.5, 0.7), (0.7, 0.8), (0.8, 0.9), (0.9, 0.95), (0.95, 1.0001)):
         inside = (p >= lo) & (p < hi)
         if inside.any():
-            print(f"  {lo:.2f}-{min(hi, 1.0):.2f}: {int(inside.sum()):4d} named, {y[inside].mean():.3f} right, "
+            print(f"  {lo:.2f}-{min(hi, 1.0):.2f}: {int(inside.sum()):4d} judged, {y[inside].mean():.3f} right, "
                   f"mean confidence {p[inside].mean():.3f}")
     print(f"log loss {float(np.mean(np.logaddexp(0.0, X @ w) - y * (X @ w))):.4f} "
           f"(the constant model: {-(y.mean() * math.log(y.mean()) + (1 - y.mean()) * math.log(1 - y.mean())):.4f})"

@@ -52,8 +52,7 @@ def recomputed(outcome: Outcome) -> dict:
     out = {}
     for name, kept in outcome.named.items():
         e = (outcome.evidence or {}).get(name)
-        out[name] = kept if not e else confidence(Evidence(e["delta_bic"], e["size_over_floor"], e["explained_share"],
-                                                           e["residual_consistent"], e["replacement_margin"]))
+        out[name] = kept if not e else confidence(Evidence.from_json(e))
     return out
 
 
@@ -72,7 +71,7 @@ def main() -> int:
     args = parser.parse_args()
     if args.table:
         outcomes = [Outcome(o["case"], o["refused"], o["named"], o["unexplained"], None, o["seconds"],
-                            o.get("cpu_seconds", float("nan")), o.get("evidence"))
+                            o.get("cpu_seconds", float("nan")), o.get("evidence"), o.get("dropped"))
                     for path in args.table for o in json.loads(path.read_text())]
         if args.recompute_confidence:
             outcomes = [replace(o, named=recomputed(o)) for o in outcomes]
@@ -91,7 +90,8 @@ def main() -> int:
             args.save.parent.mkdir(parents=True, exist_ok=True)
             args.save.write_text(json.dumps([{"case": o.case, "refused": o.refused, "named": o.named,
                                               "unexplained": o.to_json()["unexplained"], "seconds": o.seconds,
-                                              "cpu_seconds": o.cpu_seconds, "evidence": o.evidence}
+                                              "cpu_seconds": o.cpu_seconds, "evidence": o.evidence,
+                                              "dropped": o.dropped}
                                              for o in outcomes], indent=1))
     return 0
 

@@ -50,6 +50,7 @@ class Outcome:
     seconds: float
     cpu_seconds: float = float("nan")
     evidence: dict | None = None  # mechanism -> the evidence its confidence rests on
+    dropped: dict | None = None   # mechanism dropped by its confidence -> {"confidence", "evidence"}
 
     @property
     def decoy(self) -> dict | None:
@@ -106,7 +107,8 @@ def diagnose_case(truth_path: Path, workers: int | None = None) -> Outcome:
     result = json.loads(out.read_text())
     named = {m["mechanism"]: float(m.get("confidence", 1.0)) for m in result.get("missing_physics", [])}
     evidence = {m["mechanism"]: m.get("evidence", {}) for m in result.get("missing_physics", [])}
-    return Outcome(case, None, named, list(result.get("unexplained", [])), result, seconds, cpu, evidence)
+    dropped = result.get("selection", {}).get("dropped_by_confidence", {})
+    return Outcome(case, None, named, list(result.get("unexplained", [])), result, seconds, cpu, evidence, dropped)
 
 
 def _short(names) -> str:

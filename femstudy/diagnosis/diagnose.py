@@ -245,7 +245,7 @@ def confident_verdict(problem: Problem, fits: dict, selection, baseline: Fit, ve
     while named and named[-1].confidence < bar:
         weakest = named[-1]
         reason = Dropped(weakest.mechanism, f"its confidence is {weakest.confidence:.2f}, below {bar:g}: {why}, "
-                                            f"so not named")
+                                            f"so not named", evidence=weakest.evidence)
         again = decide(problem, fits, verdict.subset - {weakest.mechanism}, selection.inflation, workers)
         verdict = replace(again, replaced=verdict.replaced + (reason,) + again.replaced)
         named = named_mechanisms(problem, selection, baseline, verdict, bone_mu_w)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from femstudy.diagnosis.catalogue import Check, Reading
-from femstudy.diagnosis.confidence import Evidence
+from femstudy.diagnosis.confidence import Evidence, confidence
 from femstudy.diagnosis.fit import Fit
 from femstudy.diagnosis.noise import NoiseSpectrum
 from femstudy.diagnosis.outside import Unexplained
@@ -51,13 +51,8 @@ class Named:
         return {"mechanism": self.mechanism, "confidence": round(self.confidence, 4),
                 "parameters": {p.name: p.value for p in self.reading.parameters},
                 "explanation": self.reading.text,
-                "evidence": {"delta_bic": round(self.delta_bic, 1), "size": float(f"{self.size:.4g}"),
+                "evidence": {**self.evidence.to_json(), "size": float(f"{self.size:.4g}"),
                              "inclusion_probability": round(self.inclusion_probability, 4),
-                             "size_over_floor": float(f"{self.evidence.size_over_floor:.4g}"),
-                             "explained_share": round(self.evidence.explained_share, 4),
-                             "residual_consistent": bool(self.evidence.consistent),
-                             "replacement_margin": (None if self.evidence.replacement_margin is None
-                                                    else round(self.evidence.replacement_margin, 1)),
                              "signatures": {c.name: {"passed": bool(c.passed), "value": float(f"{c.value:.4g}")}
                                             for c in self.checks}}}
 
@@ -237,6 +232,9 @@ class Diagnosis:
             "selection": {"bic": {"+".join(sorted(s)) or "none": round(b, 2)
                                   for s, b in sorted(selection.bic.items(), key=lambda kv: kv[1])},
                           "not_selected": {d.mechanism: d.reason for d in selection.dropped + self.verdict.replaced},
+                          "dropped_by_confidence": {d.mechanism: {"confidence": round(confidence(d.evidence), 4),
+                                                                  "evidence": d.evidence.to_json()}
+                                                    for d in self.verdict.replaced if d.evidence is not None},
                           "inclusion_probability": {m: round(c, 4) for m, c in selection.inclusion.items()}},
             "seconds": round(self.seconds, 3),
             "notes": list(self.notes),

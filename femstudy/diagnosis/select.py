@@ -28,6 +28,7 @@ import numpy as np
 from scipy import stats
 
 from femstudy.diagnosis.catalogue import MECHANISMS, Check, in_order
+from femstudy.diagnosis.confidence import Evidence
 from femstudy.diagnosis.fit import Fit, fit
 from femstudy.diagnosis.problem import Problem
 from femstudy.diagnosis.signatures import refitter
@@ -44,6 +45,7 @@ class Dropped:
     mechanism: str
     reason: str
     failed: tuple[Check, ...] = ()
+    evidence: Evidence | None = None  # for one dropped by its confidence: the evidence it rested on
 
 
 @dataclass(frozen=True)
