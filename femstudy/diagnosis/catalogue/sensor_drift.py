@@ -162,22 +162,22 @@ class SensorDrift:
         t = problem.band.t_dec
         lo, hi = window(problem)
         drift = self.curves(problem, fit, t)
-        level = np.ones((t.size, 1))
-        two_levels = np.hstack([level, (t > problem.contact_t).astype(float)[:, None]])
+        # columns: a level, a step at contact, then P1 … P3; each channel's whitened once
+        columns = np.column_stack([np.ones(t.size), (t > problem.contact_t).astype(float),
+                                   legendre_basis(t, lo, hi, max(DEGREES))])
         penalty = math.log(max(np.count_nonzero(rows), 3))
-        residuals = [problem.whiten(c, problem.y[c] - fit.model[c] + drift[c], rows) for c in range(len(problem.channels))]
+        whitened = [(problem.whiten(c, problem.y[c] - fit.model[c] + drift[c], rows), problem.whiten(c, columns, rows))
+                    for c in range(len(problem.channels))]
 
-        def misfit(columns: np.ndarray) -> float:
+        def misfit(kept: list[int]) -> float:
             total = 0.0
-            for c, r in enumerate(residuals):
-                A = problem.whiten(c, columns, rows)
-                coef, *_ = np.linalg.lstsq(A, r, rcond=None)
-                total += float(np.sum((r - A @ coef) ** 2))
+            for r, A in whitened:
+                coef, *_ = np.linalg.lstsq(A[:, kept], r, rcond=None)
+                total += float(np.sum((r - A[:, kept] @ coef) ** 2))
             return total
 
-        jump = misfit(two_levels)
-        gain = max(jump - misfit(np.hstack([level, legendre_basis(t, lo, hi, d)])) - len(residuals) * (d - 1) * penalty
-                   for d in DEGREES)
+        jump = misfit([0, 1])
+        gain = max(jump - misfit([0, *range(2, 2 + d)]) - len(whitened) * (d - 1) * penalty for d in DEGREES)
         better = (f"two levels, one each side of the cut, fit the load-free instants better than the best smooth "
                   f"drift by {-gain:.1f}" if gain < 0 else
                   f"the best smooth drift fits the load-free instants better than two levels, one each side of the "
