@@ -225,8 +225,8 @@ def named_mechanisms(problem: Problem, selection, baseline: Fit, verdict: Verdic
         delta = selection.bic[verdict.subset - {m}] - selection.bic[verdict.subset]
         size = mech.size(problem, improved)
         evidence = Evidence(delta, size / mech.floor, share, p_value > RESIDUAL_P, verdict.replacement_margin.get(m))
-        named.append(Named(m, confidence(evidence), mech.reading(problem, improved, {"bone_mu_w": bone_mu_w}), delta,
-                           size, selection.inclusion.get(m, 0.0), selection.checks.get(m, ()), evidence))
+        named.append(Named(m, confidence(evidence), mech.reading(problem, improved, {"bone_mu_w": bone_mu_w}), size,
+                           selection.inclusion.get(m, 0.0), selection.checks.get(m, ()), evidence))
     return sorted(named, key=lambda n: -n.confidence)
 
 

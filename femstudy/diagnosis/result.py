@@ -41,7 +41,6 @@ class Named:
     mechanism: str
     confidence: float
     reading: Reading
-    delta_bic: float
     size: float
     inclusion_probability: float
     checks: tuple[Check, ...]
