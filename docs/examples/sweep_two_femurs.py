@@ -19,6 +19,9 @@ size_mm = {size}
 [analysis]
 resolved = false
 sensitivity = false   # the sweep itself compares the two femurs; no modelling-choice table per point
+[loads]
+verify = false        # nor the near-hole verification per point (coarser local models, replicate
+                      # placements): a single study of the femur chosen verifies its own measures
 [output]
 fields = false
 figures = false
