@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.optimize import lsq_linear
 
-from femstudy.diagnosis.bounded import bvls, least_squares
+from femstudy.diagnosis import bounded
+from femstudy.diagnosis.bounded import bvls, bvls_from, least_squares
 
 
 def _problem(rng, n):
@@ -45,6 +46,36 @@ def test_bvls_solution_satisfies_the_optimality_conditions():
         free = ~(at_lower | at_upper)
         assert np.all(np.abs(g[free]) <= 1e-9 * scale[free])
         assert np.all(g[at_lower] >= -1e-9 * scale[at_lower]) and np.all(g[at_upper] <= 1e-9 * scale[at_upper])
+
+
+def test_bvls_from_any_guess_of_the_bounds_finds_scipys_solution_and_from_the_right_one_in_fewer_steps(monkeypatch):
+    """Started from the sides of the solution, from a random guess or from every variable on a
+    bound, the same solution as scipy's BVLS (to 1e-9), and the sides it returns are where the
+    solution sits; from the right sides it factorises fewer column sets than from none, summed
+    over 300 random systems."""
+    rng = np.random.default_rng(10)
+    factorisations = {"none": 0, "right": 0}
+    real = bounded._householder
+
+    def counted(key):
+        def householder(A, b):
+            factorisations[key] += 1
+            return real(A, b)
+        return householder
+
+    for _ in range(300):
+        A, b, lower, upper = _problem(rng, int(rng.integers(2, 41)))
+        theirs = lsq_linear(A, b, bounds=(lower, upper), method="bvls").x
+        monkeypatch.setattr(bounded, "_householder", counted("none"))
+        x, sides = bvls_from(A, b, lower, upper, None)
+        assert np.array_equal(sides != 0, (np.abs(x - lower) <= 1e-12) | (np.abs(x - upper) <= 1e-12))
+        monkeypatch.setattr(bounded, "_householder", counted("right"))
+        from_right = bvls_from(A, b, lower, upper, sides)[0]
+        monkeypatch.setattr(bounded, "_householder", real)
+        guesses = [rng.choice([-1.0, 0.0, 1.0], A.shape[1]), np.where(np.isfinite(lower), -1.0, 1.0)]
+        for found in [from_right] + [bvls_from(A, b, lower, upper, g)[0] for g in guesses]:
+            assert np.max(np.abs(found - theirs)) <= 1e-9 * max(1.0, np.max(np.abs(theirs)))
+    assert factorisations["right"] < 0.5 * factorisations["none"]
 
 
 def test_bvls_returns_the_unbounded_solution_when_it_is_inside():

@@ -22,7 +22,7 @@ from typing import Callable
 
 import numpy as np
 
-from femstudy.diagnosis.bounded import bvls, triangular
+from femstudy.diagnosis.bounded import bvls_from, triangular
 from femstudy.diagnosis.model import Evaluation, ParameterLayout, Spec, evaluate, layout
 from femstudy.diagnosis.problem import Problem
 
@@ -105,6 +105,7 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
     r = np.concatenate(parts)
     J = _whitened_jacobian(problem, ev, rows)
     chi2 = float(r @ r)
+    sides = None   # the bounds that held at the last step's solution: the next one's start
     for _ in range(MAX_ITERATIONS):
         A = J[:, free]
         b = r + A @ theta[free]
@@ -113,7 +114,7 @@ def fit(problem: Problem, spec: Spec, start: dict | None = None, rows: np.ndarra
         b_aug = np.concatenate([b, np.sqrt(damping) * theta[free]])
         R, c = triangular(A_aug, b_aug)   # the same least squares on p rows instead of n
         proposal = theta.copy()
-        proposal[free] = bvls(R, c, lay.lower[free], lay.upper[free])
+        proposal[free], sides = bvls_from(R, c, lay.lower[free], lay.upper[free], sides)
         step, accepted = 1.0, False
         for _ in range(HALVINGS + 1):
             trial = theta + step * (proposal - theta)
