@@ -9,6 +9,7 @@ from femstudy.errors import UserError
 from femstudy.recordings import Effects, read_recording, synthesize, write_recording
 from femstudy.recordings.formats.text import TextStyle
 from femstudy.recordings.formats import registry
+from femstudy.recordings import units
 
 FORMAT_SUFFIXES = {name: w.suffix for name, w in registry.writers().items()}
 
@@ -73,6 +74,24 @@ def test_units_are_converted_through_pint(tmp_path, original, units, column, not
     assert column in path.read_text().splitlines()[len(original.metadata) + 1]
     back = read_recording(path)
     assert note in back.notes
+    assert_same_recording(back, original, 1e-8, 1e-5)
+
+
+@pytest.mark.parametrize("quantity, unit", sorted(units.SI_FACTORS))
+def test_the_si_factors_kept_without_pint_are_pints_own(quantity, unit):
+    ureg = units.registry()
+    target = units.QUANTITY_UNITS[quantity][0]
+    assert units.SI_FACTORS[quantity, unit] == pytest.approx(
+        float(ureg.Quantity(1.0, units.parse_unit(unit)).to(target).magnitude), rel=1e-14)
+    assert units.factor_to_solver(unit, quantity, "column") == units.SI_FACTORS[quantity, unit]
+
+
+def test_a_recording_in_newton_metres_and_milliseconds_is_read_without_building_pints_registry(tmp_path, original):
+    write_recording(tmp_path / "rec.csv", original, "N·m", time_unit="ms")
+    units.registry.cache_clear()
+    back = read_recording(tmp_path / "rec.csv")
+    assert units.registry.cache_info().currsize == 0
+    assert "torque_Nm converted from Nm to N·mm (x1000)" in back.notes
     assert_same_recording(back, original, 1e-8, 1e-5)
 
 
