@@ -109,15 +109,33 @@ def context(problem: Problem, f: Fit) -> Context:
                    float(np.median(np.diff(problem.band.t_dec))))
 
 
-def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[np.ndarray], width: int, fixed: bool):
+def _distinct_smoothed(problem: Problem, columns: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Columns on the model grid at the band's instants (instants × distinct columns), each array
+    smoothed once however many candidates return it (the timing shape's every candidate returns
+    the load itself), and which of them each column is."""
+    first: dict[int, int] = {}
+    distinct, positions = [], []
+    for column in columns:   # all alive in ``columns``, so no two share an id
+        k = first.get(id(column))
+        if k is None:
+            k = first[id(column)] = len(distinct)
+            distinct.append(column)
+        positions.append(k)
+    return problem.band.smooth_columns(np.column_stack(distinct)), np.array(positions)
+
+
+def _gains(problem: Problem, residuals: list[np.ndarray], blocks: list[tuple[np.ndarray, np.ndarray]], width: int,
+           fixed: bool):
     """Per channel and candidate: Δχ² of a GLS fit of the candidate's ``width`` columns, and the
-    amplitudes; with ``fixed`` the first column enters with coefficient 1."""
+    amplitudes; with ``fixed`` the first column enters with coefficient 1. ``blocks``: per channel
+    the distinct smoothed columns and which each candidate's column is (:func:`_distinct_smoothed`),
+    whitened once each."""
     rows = problem.usable
     gains, coefs = [], []
-    for c, (r, X) in enumerate(zip(residuals, blocks)):
+    for c, (r, (X, positions)) in enumerate(zip(residuals, blocks)):
         rw = problem.whiten(c, r, rows)
-        Xw = problem.whiten(c, X, rows)
-        m = X.shape[1] // width
+        Xw = problem.whiten(c, X, rows)[:, positions]
+        m = positions.size // width
         Xw = Xw.reshape(Xw.shape[0], m, width).transpose(1, 0, 2)
         if fixed:
             e = rw[None, :] - Xw[:, :, 0]
@@ -141,7 +159,7 @@ def _scan(problem: Problem, ctx: Context, residuals: list, loads: np.ndarray, ki
     variants = [tuple(True for _ in range(n_ch))]
     if n_ch == 2:
         variants += [(True, False), (False, True)]
-    blocks = [problem.band.smooth_model(np.vstack([col for cand in candidates for col in shape.columns(ctx, c, loads[c], cand)])).T
+    blocks = [_distinct_smoothed(problem, [col for cand in candidates for col in shape.columns(ctx, c, loads[c], cand)])
               for c in range(n_ch)]
     width, fixed = shape.width, shape.fixed_first
     gains, coefs = _gains(problem, residuals, blocks, width, fixed)
@@ -155,7 +173,7 @@ def _scan(problem: Problem, ctx: Context, residuals: list, loads: np.ndarray, ki
         if best is None or total[j] > best[0]:
             best = (float(total[j]), j, used, k)
     gain, j, used, k = best
-    return Shape(kind, dict(candidates[j]), used, tuple(blk[:, j * width:(j + 1) * width] for blk in blocks),
+    return Shape(kind, dict(candidates[j]), used, tuple(X[:, positions[j * width:(j + 1) * width]] for X, positions in blocks),
                  tuple(coefs[c][j] if used[c] else np.zeros(width) for c in range(n_ch)),
                  tuple(float(gains[c][j]) if used[c] else 0.0 for c in range(n_ch)),
                  gain, shape.interval(ctx, candidates[j]), k, shape.scanned)
