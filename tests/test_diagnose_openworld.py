@@ -112,6 +112,31 @@ def test_a_mechanism_a_shape_takes_most_of_is_not_named(tmp_path, monkeypatch):
     assert "chip_clogging" in diagnose_case(truth).named
 
 
+def test_after_a_replacement_no_subsets_residual_is_scanned_again(tmp_path, monkeypatch):
+    """Formbench tuning case softening+pulsation 106002: shapes replace the clogging and the
+    softening, and the replacement test runs again on what stands. Every smaller subset it needs
+    then was a smaller subset before, so each subset's residual is scanned for competing shapes
+    once (the code before scanned them all again)."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from bench.formbench.score import diagnose_case
+    from femstudy.diagnosis import verdict
+
+    case = make_formbench_case("softening+pulsation", 106_002, "tuning", tmp_path)
+    scanned = []
+    real = verdict._competitors
+
+    def counted(problem, sent):
+        scanned.append(sent[0].subset)
+        return real(problem, sent)
+
+    monkeypatch.setattr(verdict, "_competitors", counted)
+    outcome = diagnose_case(tmp_path / f"{case.name}.truth.json", workers=1)
+    replaced = [m for m, why in outcome.result["selection"]["not_selected"].items()
+                if "explains the data better in its place" in why]
+    assert replaced and outcome.named
+    assert scanned and len(scanned) == len(set(scanned))
+
+
 def test_the_diagnosis_is_the_same_with_its_fits_and_scans_in_worker_processes_or_not(tmp_path, monkeypatch):
     """The spindle slowdown above goes through every step that runs in worker processes: the
     subsets' fits, the scans of the smaller subsets' residuals for competing shapes, the refits

@@ -67,9 +67,11 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
     """Item 2 of the module: the subset left once shapes have replaced what they explain better,
     the replacements, and per kept mechanism the margin by which its best replacement failed.
     The scans of the smaller subsets' residuals, and the refits with their shapes, run side by
-    side in ``pool``."""
+    side in ``pool``, each subset's once (a replacement leaves a subset whose smaller subsets were
+    all scanned already)."""
     replaced: list[Dropped] = []
     margins: dict[str, float] = {}
+    scanned: dict[frozenset, list] = {}   # a smaller subset's shapes and refits with them, once per subset
 
     def bic(f: Fit, shape: outside.Shape) -> float:
         return information(problem, f, inflation) + shape.scanned * math.log(n_eff(problem))
@@ -78,10 +80,14 @@ def replace_by_shapes(problem: Problem, fits: dict, subset: frozenset, inflation
         full = information(problem, fits[subset], inflation)
         smaller = [frozenset(kept) for size in range(len(subset))
                    for kept in itertools.combinations(sorted(subset), size)]
-        found = pool.run(_competitors, [portable(fits[kept]) for kept in smaller])
-        tried = [(kept, shape) for kept, shapes in zip(smaller, found) for shape in shapes]
-        refits = pool.fit_many([_with_shape(fits[kept], shape) for kept, shape in tried])
-        scored = sorted(((bic(f, shape), kept, shape) for (kept, shape), f in zip(tried, refits)),
+        # after a replacement every smaller subset of what stands was a smaller subset before
+        new = [kept for kept in smaller if kept not in scanned]
+        shapes = dict(zip(new, pool.run(_competitors, [portable(fits[kept]) for kept in new])))
+        tried = [(kept, shape) for kept in new for shape in shapes[kept]]
+        scanned.update({kept: [] for kept in new})
+        for (kept, shape), f in zip(tried, pool.fit_many([_with_shape(fits[kept], shape) for kept, shape in tried])):
+            scanned[kept].append((shape, f))
+        scored = sorted(((bic(f, shape), kept, shape) for kept in smaller for shape, f in scanned[kept]),
                         key=lambda b: b[0])
         for m in in_order(subset):
             alternatives = [b for b, kept, _ in scored if m not in kept]
