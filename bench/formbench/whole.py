@@ -29,6 +29,8 @@ from bench.formbench.cases import case_seeds, make_case
 
 #: The per-recording target [s] (issue 31).
 TARGET_S = 10.0
+#: This checkout (A's code).
+HERE = Path(__file__).resolve().parents[2]
 
 
 def long_cases(split: str, seed: int, folder: Path) -> list[str]:
@@ -42,10 +44,6 @@ def long_cases(split: str, seed: int, folder: Path) -> list[str]:
             for path in folder.glob(f"{case.name}*"):
                 path.unlink()
     return names
-
-
-#: This checkout (A's code).
-HERE = Path(__file__).resolve().parents[2]
 
 
 def diagnose(folder: Path, name: str, tree: Path, tag: str) -> tuple[float, float, tuple]:

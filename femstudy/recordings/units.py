@@ -44,7 +44,7 @@ def registry():
     femstudy does not own, shared with every program using pint, whose entries pint
     unpickles, so a half-written entry made valid units unknown and a planted one would run
     code. Building the registry without it costs about a second, once, and only when a
-    recording has units other than femstudy's own."""
+    recording has units other than femstudy's own and the SI multiples of :data:`SI_FACTORS`."""
     import pint
 
     return pint.UnitRegistry(cache_folder=None)
@@ -100,10 +100,11 @@ def factor_to_solver(unit_text: str, quantity: str, subject: str) -> float:
     1000.0
     """
     target, dimension, examples = QUANTITY_UNITS[quantity]
-    if normalise_unit(unit_text) == target:
+    written = normalise_unit(unit_text)
+    if written == target:
         return 1.0  # femstudy's own unit: nothing to convert, and no need to load pint's registry
-    if (quantity, normalise_unit(unit_text)) in SI_FACTORS:
-        return SI_FACTORS[quantity, normalise_unit(unit_text)]
+    if (quantity, written) in SI_FACTORS:
+        return SI_FACTORS[quantity, written]
     unit = parse_unit(unit_text)
     if unit is None:
         raise UserError(f"{subject} has unit '{unit_text}', which is not a unit femstudy knows; {quantity} needs "
