@@ -22,15 +22,15 @@ QUANTITY_UNITS = {
     "fx": ("N", "force", "N, kN or lbf"),
     "fy": ("N", "force", "N, kN or lbf"),
 }
-#: (quantity, unit as :func:`normalise_unit` writes it) -> factor to femstudy's unit, for the
-#: SI multiples recordings are most often written in: pint's answers (a test holds them equal),
-#: kept so that reading such a recording does not import pint and build its registry (0.8 s).
+#: (femstudy's unit, a unit as :func:`normalise_unit` writes it) -> the factor between them, for
+#: the SI multiples recordings are most often written in: pint's answers (a test holds them
+#: equal), kept so that reading such a recording does not import pint and build its registry
+#: (0.8 s). Keyed by femstudy's unit, so every quantity of a dimension (thrust, fx, fy) shares them.
 SI_FACTORS = {
-    ("time", "ms"): 1e-3, ("time", "us"): 1e-6, ("time", "min"): 60.0,
-    ("thrust", "kN"): 1e3, ("thrust", "mN"): 1e-3, ("thrust", "daN"): 10.0,
-    ("fx", "kN"): 1e3, ("fy", "kN"): 1e3,
-    ("torque", "N*m"): 1e3, ("torque", "N*cm"): 10.0, ("torque", "kN*m"): 1e6, ("torque", "mN*m"): 1.0,
-    ("depth", "m"): 1e3, ("depth", "cm"): 10.0, ("depth", "um"): 1e-3,
+    ("s", "ms"): 1e-3, ("s", "us"): 1e-6, ("s", "min"): 60.0,
+    ("N", "kN"): 1e3, ("N", "mN"): 1e-3, ("N", "daN"): 10.0,
+    ("N*mm", "N*m"): 1e3, ("N*mm", "N*cm"): 10.0, ("N*mm", "kN*m"): 1e6, ("N*mm", "mN*m"): 1.0,
+    ("mm", "m"): 1e3, ("mm", "cm"): 10.0, ("mm", "um"): 1e-3,
 }
 _CONCATENATED = re.compile(r"(k?N|daN|mN|lbf|ozf|kgf)(mm|cm|dm|m|in|ft)")
 _PRODUCT_SIGNS = re.compile(r"\s*[·⋅•×∙]\s*|(?<=[A-Za-z])-(?=[A-Za-z])")
@@ -103,8 +103,8 @@ def factor_to_solver(unit_text: str, quantity: str, subject: str) -> float:
     written = normalise_unit(unit_text)
     if written == target:
         return 1.0  # femstudy's own unit: nothing to convert, and no need to load pint's registry
-    if (quantity, written) in SI_FACTORS:
-        return SI_FACTORS[quantity, written]
+    if (target, written) in SI_FACTORS:
+        return SI_FACTORS[target, written]
     unit = parse_unit(unit_text)
     if unit is None:
         raise UserError(f"{subject} has unit '{unit_text}', which is not a unit femstudy knows; {quantity} needs "
