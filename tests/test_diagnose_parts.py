@@ -278,3 +278,34 @@ def test_fits_spread_over_worker_processes_equal_the_fits_made_one_by_one():
         assert np.array_equal(f.theta, g.theta) and np.array_equal(f.chi2, g.chi2) and np.array_equal(f.model, g.model)
         assert f.n_params == g.n_params
         assert np.array_equal(g.evaluation.model, g.model)
+
+
+def test_clock_search_smoothing_is_scipys_gaussian_filter_to_round_off():
+    from scipy import ndimage
+
+    from femstudy.diagnosis.timing import gaussian_rows
+
+    rng = np.random.default_rng(3)
+    y = np.cumsum(rng.normal(size=(7, 400)), axis=1)
+    for sigma in (1.0, 10.0, 37.5):
+        expected = ndimage.gaussian_filter1d(y, sigma, axis=-1, mode="nearest")
+        assert np.max(np.abs(gaussian_rows(y, sigma) - expected)) <= 1e-12 * np.max(np.abs(y))
+    assert np.allclose(gaussian_rows(y[0], 10.0), ndimage.gaussian_filter1d(y[0], 10.0, mode="nearest"), rtol=0,
+                       atol=1e-12 * np.max(np.abs(y)))
+
+
+def test_the_air_step_search_ranks_each_index_as_a_least_squares_fit_would():
+    from femstudy.diagnosis.air import _step_sse
+
+    rng = np.random.default_rng(4)
+    for n in (40, 333, 2000):
+        u = np.sort(rng.uniform(0, 3, n))
+        s = 2 + 0.3 * u + rng.normal(0, 1, n) + 5.0 * (np.arange(n) >= n // 3)
+        ks = np.arange(5, n - 5, 2)
+        fitted = []
+        for k in ks:
+            A = np.column_stack([np.ones(n), u, (np.arange(n) >= k).astype(float)])
+            c, *_ = np.linalg.lstsq(A, s, rcond=None)
+            fitted.append(float(np.sum((s - A @ c) ** 2)))
+        assert np.allclose(_step_sse(u, s, ks), fitted, rtol=1e-10, atol=0)
+        assert abs(int(ks[np.argmin(_step_sse(u, s, ks))]) - n // 3) <= 2

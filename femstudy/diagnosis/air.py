@@ -94,10 +94,27 @@ def _robust_trend(t: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, float]:
     return e, sigma
 
 
+def _step_sse(u: np.ndarray, s: np.ndarray, ks: np.ndarray) -> np.ndarray:
+    """Sum of squares left by a least-squares line plus a step at each index of ``ks`` (1 from
+    there on): what the line leaves, less the part of it along the step's own direction (the
+    step with the line projected out), from tail sums instead of one fit per index."""
+    n = u.size
+    q1 = np.full(n, 1 / np.sqrt(n))
+    centred = u - u.mean()
+    q2 = centred / (np.linalg.norm(centred) or 1.0)
+    r0 = s - q1 * (q1 @ s) - q2 * (q2 @ s)
+    tail = lambda x: np.cumsum(x[::-1])[::-1][ks]
+    along_1, along_2 = (n - ks) / np.sqrt(n), tail(q2)
+    norm = (n - ks) - along_1 ** 2 - along_2 ** 2
+    return float(r0 @ r0) - tail(r0) ** 2 / np.maximum(norm, 1e-300)
+
+
 def _step(t: np.ndarray, s: np.ndarray, peak: float) -> tuple[float, float, np.ndarray] | None:
     """The strongest step in ``s`` on top of a straight line (time, size, residual of the step
     fit), or None: it must explain most of what the line leaves (``STEP_SHARE``), stand
-    ``EVENT_SIGMAS`` robust standard deviations of that residual and ``EVENT_FRACTION`` of the peak."""
+    ``EVENT_SIGMAS`` robust standard deviations of that residual and ``EVENT_FRACTION`` of the peak.
+    The step's index is the one of least sum of squares (:func:`_step_sse`); its fit is then made
+    by least squares."""
     edge = max(int(STEP_EDGE_S / float(np.median(np.diff(t)))), 3)
     if t.size < 3 * edge:
         return None
@@ -105,15 +122,12 @@ def _step(t: np.ndarray, s: np.ndarray, peak: float) -> tuple[float, float, np.n
     line = np.column_stack([np.ones_like(u), u])
     coef, *_ = np.linalg.lstsq(line, s, rcond=None)
     base = float(np.sum((s - line @ coef) ** 2))
-    best = None
-    for k in range(edge, t.size - edge, max(edge // 4, 1)):
-        A = np.column_stack([line, (np.arange(t.size) >= k).astype(float)])
-        c, *_ = np.linalg.lstsq(A, s, rcond=None)
-        r = s - A @ c
-        sse = float(r @ r)
-        if best is None or sse < best[0]:
-            best = (sse, k, float(c[2]), r)
-    sse, k, size, r = best
+    ks = np.arange(edge, t.size - edge, max(edge // 4, 1))
+    k = int(ks[np.argmin(_step_sse(u, s, ks))])
+    A = np.column_stack([line, (np.arange(t.size) >= k).astype(float)])
+    c, *_ = np.linalg.lstsq(A, s, rcond=None)
+    r = s - A @ c
+    sse, size = float(r @ r), float(c[2])
     sigma = 1.4826 * float(np.median(np.abs(r - np.median(r)))) or 1e-12
     if base - sse < STEP_SHARE * base or abs(size) < EVENT_SIGMAS * sigma or abs(size) < EVENT_FRACTION * peak:
         return None

