@@ -103,7 +103,10 @@ def _step_sse(u: np.ndarray, s: np.ndarray, ks: np.ndarray) -> np.ndarray:
     centred = u - u.mean()
     q2 = centred / (np.linalg.norm(centred) or 1.0)
     r0 = s - q1 * (q1 @ s) - q2 * (q2 @ s)
-    tail = lambda x: np.cumsum(x[::-1])[::-1][ks]
+
+    def tail(x: np.ndarray) -> np.ndarray:   # Σ_{i ≥ k} x_i at each k of ks
+        return np.cumsum(x[::-1])[::-1][ks]
+
     along_1, along_2 = (n - ks) / np.sqrt(n), tail(q2)
     norm = (n - ks) - along_1 ** 2 - along_2 ** 2
     return float(r0 @ r0) - tail(r0) ** 2 / np.maximum(norm, 1e-300)
