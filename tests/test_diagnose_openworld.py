@@ -156,3 +156,28 @@ def test_the_diagnosis_is_the_same_with_its_fits_and_scans_in_worker_processes_o
     alone = diagnose_case(truth).result
     assert spread.pop("seconds") > 0 and alone.pop("seconds") > 0
     assert spread == alone
+
+
+def test_a_shape_scan_smooths_the_load_once_however_many_candidates_return_it(tmp_path, monkeypatch):
+    """Every candidate of the timing shape returns the modelled load itself as its second column:
+    a scan smooths and whitens it once per channel, not once per candidate (the candidates were
+    given a new view of it each, which no two shared)."""
+    from bench.formbench.cases import make_case as make_formbench_case
+    from bench.formbench.score import diagnose_case
+    from femstudy.diagnosis import outside
+    from femstudy.diagnosis.shapes import SHAPES
+
+    case = make_formbench_case("clogging", 100_000, "tuning", tmp_path)
+    counts = []
+    real = outside._distinct_smoothed
+
+    def counted(problem, columns):
+        smoothed, positions = real(problem, columns)
+        counts.append((len(columns), smoothed.shape[1]))
+        return smoothed, positions
+
+    monkeypatch.setattr(outside, "_distinct_smoothed", counted)
+    diagnose_case(tmp_path / f"{case.name}.truth.json", workers=1)
+    grid = len(SHAPES["timing"].candidates(None))
+    timing = [(n, distinct) for n, distinct in counts if n == 2 * grid]
+    assert timing and all(distinct == grid + 1 for _, distinct in timing)

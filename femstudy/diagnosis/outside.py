@@ -159,8 +159,8 @@ def _scan(problem: Problem, ctx: Context, residuals: list, loads: np.ndarray, ki
     variants = [tuple(True for _ in range(n_ch))]
     if n_ch == 2:
         variants += [(True, False), (False, True)]
-    blocks = [_distinct_smoothed(problem, [col for cand in candidates for col in shape.columns(ctx, c, loads[c], cand)])
-              for c in range(n_ch)]
+    blocks = [_distinct_smoothed(problem, [col for cand in candidates for col in shape.columns(ctx, c, load, cand)])
+              for c, load in enumerate(loads)]   # one array per channel, so that a column returning it is one column
     width, fixed = shape.width, shape.fixed_first
     gains, coefs = _gains(problem, residuals, blocks, width, fixed)
     best = None
