@@ -292,6 +292,7 @@ def test_clock_search_smoothing_is_scipys_gaussian_filter_to_round_off():
         assert np.max(np.abs(gaussian_rows(y, sigma) - expected)) <= 1e-12 * np.max(np.abs(y))
     assert np.allclose(gaussian_rows(y[0], 10.0), ndimage.gaussian_filter1d(y[0], 10.0, mode="nearest"), rtol=0,
                        atol=1e-12 * np.max(np.abs(y)))
+    assert gaussian_rows(np.zeros((3, 0)), 10.0).shape == ndimage.gaussian_filter1d(np.zeros((3, 0)), 10.0).shape
 
 
 def test_the_air_step_search_ranks_each_index_as_a_least_squares_fit_would():
