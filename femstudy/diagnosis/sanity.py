@@ -101,7 +101,8 @@ class Finding:
                 "evidence": {"correction_factor": float(f"{self.factor:.6g}")}}
 
 
-def _smoothed(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
+def running_mean(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
+    """``y`` averaged over a window of ``width_s`` [s] (at least one sample), edges extended."""
     dt = float(np.median(np.diff(t)))
     return ndimage.uniform_filter1d(y, max(int(round(width_s / dt)), 1), mode="nearest")
 
@@ -109,7 +110,7 @@ def _smoothed(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
 def polarity_from_excursion(rec: Recording) -> list[Finding]:
     """Against a load model (no trace to correlate with): the thrust's excursion from its median is
     downward."""
-    x = _smoothed(rec.time_s, rec.thrust_N, 0.05)
+    x = running_mean(rec.time_s, rec.thrust_N, 0.05)
     low, mid, high = np.percentile(x, [0.5, 50, 99.5])
     if mid - low > 3 * (high - mid) and mid - low > 0:
         return [Finding("polarity", "thrust_N", -1.0, "the thrust is written with the opposite sign (its load is "
@@ -197,7 +198,7 @@ def check(rec: Recording, sim, correlations: tuple[float, ...]) -> tuple[Recordi
     F_sim, T_sim = sim.loads(t[inside])
     sims = {"thrust_N": F_sim, "torque_Nmm": T_sim}
     revolution = 60.0 / rec.spindle_rpm
-    smooth = {c: _smoothed(t, channels[c], revolution)[inside] for c in names}
+    smooth = {c: running_mean(t, channels[c], revolution)[inside] for c in names}
     tt = t[inside]
     if len(names) == 2 and T_sim is not None:
         straight = (_level_ratio(tt, smooth["thrust_N"], F_sim), _level_ratio(tt, smooth["torque_Nmm"], T_sim))

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage, signal
 
-from femstudy.diagnosis.sanity import MIN_CORRELATION
+from femstudy.diagnosis.sanity import MIN_CORRELATION, running_mean
 
 #: The trace is smoothed over this fraction of l/f (at least 20 ms or half a revolution) for its
 #: events, and a fall may pause this long: a simulation's loads can move in steps (lip elements,
@@ -102,11 +102,6 @@ class TraceEvents:
                 "depth_reached_mm": round(self.depth_reached_mm, 3)}
 
 
-def _smoothed(t: np.ndarray, y: np.ndarray, width_s: float) -> np.ndarray:
-    dt = float(np.median(np.diff(t)))
-    return ndimage.uniform_filter1d(y, max(int(round(width_s / dt)), 1), mode="nearest")
-
-
 def trace_events(time_s: np.ndarray, thrust_N: np.ndarray, contact_s: float, stop_s: float,
                  feed_mm_s: float, spindle_rpm: float, cone_mm: float) -> TraceEvents:
     """Events of a noise-free simulated thrust (see the module docstring).
@@ -131,7 +126,7 @@ def trace_events(time_s: np.ndarray, thrust_N: np.ndarray, contact_s: float, sto
     """
     revolution = 60.0 / spindle_rpm
     entry_s = cone_mm / feed_mm_s
-    F = _smoothed(time_s, thrust_N, max(min(0.02, revolution / 2), SMOOTHING_OF_ENTRY * entry_s))
+    F = running_mean(time_s, thrust_N, max(min(0.02, revolution / 2), SMOOTHING_OF_ENTRY * entry_s))
     slope = np.gradient(F, time_s)
     end = stop_s if math.isfinite(stop_s) else float(time_s[-1])
     full = contact_s + entry_s
@@ -193,7 +188,7 @@ def clock_offset_s(rec_t: np.ndarray, rec_channels: list[np.ndarray], sim, spind
     def level(y: np.ndarray) -> np.ndarray:
         return gaussian_rows(y, width)
 
-    levels = [level(np.interp(grid, rec_t, _smoothed(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
+    levels = [level(np.interp(grid, rec_t, running_mean(rec_t, y, 60.0 / spindle_rpm))) for y in rec_channels]
     recorded = [np.gradient(y) for y in levels]
     lo_span, hi_span = sim.span()
     first, last = grid[0] + CONTACT_MARGIN_S - sim.contact_s, grid[-1] - 1.0 - sim.contact_s
