@@ -9,7 +9,7 @@ With ``--vs TREE`` each recording is diagnosed by this code (A) and by the packa
 e.g. ``git worktree add ../before REV``), one after the other, the order swapped from one
 recording to the next; per recording: wall and CPU seconds of each (the process and its fitting
 workers), their ratio, and whether the named mechanisms (with their confidences) and the
-unexplained kinds are the same. Run it with nothing else on the machine: the figures are wall
+unexplained kinds are the same, and whether the whole diagnosis JSON is (all but its wall time). Run it with nothing else on the machine: the figures are wall
 times.
 """
 
@@ -46,10 +46,10 @@ def long_cases(split: str, seed: int, folder: Path) -> list[str]:
     return names
 
 
-def diagnose(folder: Path, name: str, tree: Path, tag: str) -> tuple[float, float, tuple]:
+def diagnose(folder: Path, name: str, tree: Path, tag: str) -> tuple[float, float, tuple, dict]:
     """Wall and CPU seconds of one whole ``femstudy diagnose`` process with the package of
-    ``tree``, and what it named. It runs in ``folder``: a working directory holding a package
-    would come before PYTHONPATH."""
+    ``tree``, what it named, and its JSON without the wall time. It runs in ``folder``: a working
+    directory holding a package would come before PYTHONPATH."""
     out = folder / f"{name}.{tag}.json"
     before, start = os.times(), time.perf_counter()
     subprocess.run([sys.executable, "-m", "femstudy", "diagnose", f"{name}.csv", "--simulation", f"{name}-sim.csv",
@@ -59,7 +59,8 @@ def diagnose(folder: Path, name: str, tree: Path, tag: str) -> tuple[float, floa
     cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
     result = json.loads(out.read_text())
     named = tuple((m["mechanism"], m.get("confidence")) for m in result["missing_physics"])
-    return wall, cpu, (named, tuple(u["kind"] for u in result["unexplained"]))
+    result.pop("seconds", None)
+    return wall, cpu, (named, tuple(u["kind"] for u in result["unexplained"])), result
 
 
 def main() -> None:
@@ -74,7 +75,7 @@ def main() -> None:
         names = long_cases(args.split, args.seed, folder)[:args.first]
         print(f"{len(names)} recordings of 18-22 s at 1 kHz, split {args.split}, seed {args.seed}", flush=True)
         walls: dict[str, list[float]] = {"A": [], "B": []}
-        ratios, same = [], 0
+        ratios, same, identical = [], 0, 0
         for k, name in enumerate(names):
             order = [("A", HERE), ("B", args.vs)] if args.vs else [("A", HERE)]
             runs = {tag: diagnose(folder, name, tree, tag) for tag, tree in (order if k % 2 == 0 else order[::-1])}
@@ -84,8 +85,10 @@ def main() -> None:
                 walls["B"].append(runs["B"][0])
                 ratios.append(runs["A"][0] / runs["B"][0])
                 same += runs["A"][2] == runs["B"][2]
+                identical += runs["A"][3] == runs["B"][3]
                 line += (f"   B wall {runs['B'][0]:6.2f} s, CPU {runs['B'][1]:6.2f} s   A/B {ratios[-1]:.3f}   "
-                         f"same verdict: {'yes' if runs['A'][2] == runs['B'][2] else 'NO'}")
+                         f"same verdict: {'yes' if runs['A'][2] == runs['B'][2] else 'NO'}, "
+                         f"same JSON: {'yes' if runs['A'][3] == runs['B'][3] else 'no'}")
             print(line, flush=True)
         for tag in ("A", "B") if args.vs else ("A",):
             w = walls[tag]
@@ -93,7 +96,7 @@ def main() -> None:
                   f"{sum(x > TARGET_S for x in w)} of {len(w)} over {TARGET_S:g} s")
         if args.vs:
             print(f"A/B wall, median {statistics.median(ratios):.3f} ({min(ratios):.3f}-{max(ratios):.3f}); "
-                  f"same verdict on {same} of {len(names)}")
+                  f"same verdict on {same} of {len(names)}, the same JSON (all but its wall time) on {identical}")
 
 
 if __name__ == "__main__":
